@@ -1,0 +1,24 @@
+"""The scenes, registered with gymnasium under ``zsrm/``.
+
+>>> import gymnasium as gym, zsrm.envs
+>>> env = gym.make("zsrm/Tabletop-v0", task="a yellow block on the right of a red block",
+...                cameras=("front", "left", "tilted"), image_size=64)
+"""
+from gymnasium.envs.registration import register, registry
+
+from zsrm.envs.pendulum import DoublePendulumPixelEnv
+from zsrm.envs.pushing import PushingEnv
+from zsrm.envs.tabletop import TabletopEnv
+from zsrm.tasks.catalogue import PENDULUM_ID, PUSHING_ID, TABLETOP_ID
+
+EPISODE_STEPS = 100
+
+for _id, _entry in (
+    (TABLETOP_ID, "zsrm.envs.tabletop:TabletopEnv"),
+    (PUSHING_ID, "zsrm.envs.pushing:PushingEnv"),
+    (PENDULUM_ID, "zsrm.envs.pendulum:DoublePendulumPixelEnv"),
+):
+    if _id not in registry:
+        register(id=_id, entry_point=_entry, max_episode_steps=EPISODE_STEPS if _id != PENDULUM_ID else 1000)
+
+__all__ = ["DoublePendulumPixelEnv", "PushingEnv", "TabletopEnv", "EPISODE_STEPS"]

@@ -1,0 +1,216 @@
+"""What the MuJoCo scenes share: loading the MJCF, cameras, offscreen rendering, hidden objects,
+seeded initial layouts and the oracle that reads the true state.
+
+Agents see only ``observation[camera]`` images. ``info`` carries the true object positions,
+``oracle_reward`` and ``is_success`` for evaluation and privileged baselines only; the reward
+returned by ``step`` is always 0 (zsrm's reward wrappers supply the reward).
+"""
+from __future__ import annotations
+
+import os
+from importlib import resources
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from zsrm.tasks.catalogue import SINGLE_TASKS
+from zsrm.tasks.language import GoalError, Task, parse_goal
+from zsrm.tasks.relations import CAMERAS, WORLD_THRESHOLDS, holds_in_world
+
+TABLE_TOP = 0.4
+SPREADS = ("seen", "unseen")
+
+
+def load_model(asset: str) -> mujoco.MjModel:
+    xml = resources.files("zsrm.envs").joinpath("assets", asset).read_text()
+    return mujoco.MjModel.from_xml_string(xml)
+
+
+def check_cameras(cameras) -> tuple[str, ...]:
+    if isinstance(cameras, str):
+        cameras = (cameras,)
+    cameras = tuple(cameras)
+    if not cameras:
+        raise ValueError(f"give at least one camera of {', '.join(CAMERAS)}")
+    for c in cameras:
+        if c not in CAMERAS:
+            raise ValueError(f"unknown camera {c!r}; known cameras: {', '.join(CAMERAS)}")
+    return cameras
+
+
+def as_task(task, shape: str) -> Task:
+    """A Task from a Task, a goal sentence or a catalogue name; checks it suits the scene."""
+    if isinstance(task, str):
+        task = parse_goal(SINGLE_TASKS[task].goal if task in SINGLE_TASKS else task)
+    if not isinstance(task, Task):
+        raise GoalError(f"expected a goal sentence or a Task, got {type(task).__name__}")
+    if task.shape != shape:
+        raise GoalError(f"this scene has {shape}s, but the goal {task.text!r} names {task.shape}s")
+    return task
+
+
+class MujocoPixelEnv(gym.Env):
+    """Base class of the tabletop and pushing scenes. Subclasses set the action space, apply
+    actions (:meth:`_apply_action`) and lay out objects (:meth:`_initial_layout`)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 12}
+    asset: str
+    shape: str  # "block" or "puck": the object bodies are named f"{shape}_{colour}"
+    object_half_size: float
+    frame_skip = 10  # 10 x 4 ms = one 0.04 s control step
+
+    def __init__(self, task, cameras=("front",), image_size: int = 64, spread: str = "seen",
+                 render_mode: str | None = None):
+        if spread not in SPREADS:
+            raise ValueError(f"unknown spread {spread!r}; choose one of {', '.join(SPREADS)}")
+        if not isinstance(image_size, (int, np.integer)) or not 16 <= image_size <= 512:
+            raise ValueError(f"image_size must be an integer in [16, 512], got {image_size!r}")
+        self.task = as_task(task, self.shape)
+        self.cameras = check_cameras(cameras)
+        self.image_size = int(image_size)
+        self.spread = spread
+        self.render_mode = render_mode
+
+        self.model = load_model(self.asset)
+        self.data = mujoco.MjData(self.model)
+        self._hide_unused_objects()
+        self._renderer = None
+        self._scene_option = mujoco.MjvOption()
+        self._scene_option.geomgroup[3] = 0  # hidden objects
+        self.observation_space = gym.spaces.Dict(
+            {c: gym.spaces.Box(0, 255, (self.image_size, self.image_size, 3), np.uint8) for c in self.cameras}
+        )
+
+    # --- objects -------------------------------------------------------------------------
+    def _body(self, colour: str) -> int:
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f"{self.shape}_{colour}")
+
+    def _qpos_adr(self, colour: str) -> int:
+        return self.model.jnt_qposadr[self.model.body_jntadr[self._body(colour)]]
+
+    def _hide_unused_objects(self):
+        from zsrm.tasks.language import COLOURS
+
+        self._all_colours = COLOURS
+        for i, colour in enumerate(COLOURS):
+            if colour in self.task.objects:
+                continue
+            body = self._body(colour)
+            for g in range(self.model.body_geomadr[body], self.model.body_geomadr[body] + self.model.body_geomnum[body]):
+                self.model.geom_group[g] = 3
+                self.model.geom_contype[g] = 0
+                self.model.geom_conaffinity[g] = 0
+            self.model.body_gravcomp[body] = 1.0
+            self.model.body_pos[body] = (2.0 + i, 2.0, 0.1)
+
+    def object_positions(self) -> dict[str, np.ndarray]:
+        """True world positions of the task's objects, keyed by colour."""
+        return {c: self.data.xpos[self._body(c)].copy() for c in self.task.objects}
+
+    def _set_object(self, colour: str, xyz):
+        adr = self._qpos_adr(colour)
+        self.data.qpos[adr:adr + 3] = xyz
+        self.data.qpos[adr + 3:adr + 7] = (1, 0, 0, 0)
+
+    def _park_unused(self):
+        for i, colour in enumerate(self._all_colours):
+            if colour not in self.task.objects:
+                self._set_object(colour, (2.0 + i, 2.0, 0.1))
+
+    # --- oracle ------------------------------------------------------------------------
+    def oracle_success(self) -> bool:
+        pos = self.object_positions()
+        return bool(holds_in_world(self.task.relation, [pos[c] for c in self.task.objects], WORLD_THRESHOLDS))
+
+    def fell_off(self) -> bool:
+        return any(p[2] < TABLE_TOP - 0.05 for p in self.object_positions().values())
+
+    def _info(self) -> dict:
+        success = self.oracle_success()
+        return {
+            "object_positions": self.object_positions(),
+            "oracle_reward": float(success),
+            "is_success": success,
+        }
+
+    # --- layout ------------------------------------------------------------------------
+    @property
+    def spread_width(self) -> float:
+        """Half-range of the uniform start noise: one object width in all (seen), two (unseen)."""
+        return self.object_half_size * (1.0 if self.spread == "seen" else 2.0)
+
+    def _sample_layout(self) -> dict[str, np.ndarray]:
+        """Initial positions that do not overlap and are not already in the goal relation."""
+        rel = self.task.relation
+        for _ in range(1000):
+            layout = self._initial_layout()
+            pts = list(layout.values())
+            apart = all(np.linalg.norm(a[:2] - b[:2]) > 2.6 * self.object_half_size
+                        for i, a in enumerate(pts) for b in pts[i + 1:])
+            on_table = all(abs(p[0]) < 0.26 and abs(p[1]) < 0.18 for p in pts)
+            if apart and on_table and not holds_in_world(rel, [layout[c] for c in self.task.objects]):
+                return layout
+        raise RuntimeError(f"could not sample a start state for {self.task.text!r}")
+
+    def _initial_layout(self) -> dict[str, np.ndarray]:
+        raise NotImplementedError
+
+    # --- gym API -----------------------------------------------------------------------
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        mujoco.mj_resetData(self.model, self.data)
+        self._park_unused()
+        for colour, xyz in self._sample_layout().items():
+            self._set_object(colour, xyz)
+        self._reset_agent()
+        mujoco.mj_forward(self.model, self.data)
+        # Let objects settle onto the table before the first frame.
+        for _ in range(5):
+            mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        return self._observation(), self._info()
+
+    def step(self, action):
+        action = np.asarray(action, dtype=np.float64)
+        if action.shape != self.action_space.shape:
+            raise ValueError(f"action must have shape {self.action_space.shape}, got {action.shape}")
+        self._apply_action(np.clip(action, -1.0, 1.0))
+        info = self._info()
+        terminated = self.fell_off()
+        return self._observation(), 0.0, terminated, False, info
+
+    def _reset_agent(self):
+        raise NotImplementedError
+
+    def _apply_action(self, action: np.ndarray):
+        raise NotImplementedError
+
+    # --- rendering ---------------------------------------------------------------------
+    def _render_camera(self, camera: str, size: int | None = None) -> np.ndarray:
+        size = size or self.image_size
+        if self._renderer is None or self._renderer.height != size:
+            if self._renderer is not None:
+                self._renderer.close()
+            self._renderer = mujoco.Renderer(self.model, size, size)
+            for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION):
+                self._renderer.scene.flags[flag] = False
+        self._renderer.update_scene(self.data, camera=camera, scene_option=self._scene_option)
+        return self._renderer.render().copy()
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        return {c: self._render_camera(c) for c in self.cameras}
+
+    def render_cameras(self, cameras=CAMERAS, size: int | None = None) -> dict[str, np.ndarray]:
+        """Images of any cameras, whatever the observation holds (for reports and data)."""
+        return {c: self._render_camera(c, size) for c in check_cameras(cameras)}
+
+    def render(self):
+        """The observed cameras side by side (rgb_array)."""
+        return np.concatenate([self._render_camera(c) for c in self.cameras], axis=1)
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,77 @@
+"""Sawyer-like pushing: a planar pusher and two pucks on a table (default blue and yellow)."""
+from __future__ import annotations
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from zsrm.envs.base import TABLE_TOP, MujocoPixelEnv
+
+PUCK_HALF = 0.035
+PUCK_HALF_HEIGHT = 0.02
+MAX_MOVE = 0.025  # metres of pusher motion per step at |action| = 1
+X_RANGE = (-0.27, 0.27)
+Y_RANGE = (-0.2, 0.2)
+PUSHER_Z = TABLE_TOP + 0.03
+
+
+class PushingEnv(MujocoPixelEnv):
+    """Two pucks and a pusher driven in the table plane by a mocap body.
+
+    Actions in [-1, 1]: ``(dx, dy)``. Observations: images only.
+
+    >>> import gymnasium as gym, zsrm.envs
+    >>> env = gym.make("zsrm/Pushing-v0")  # "a blue puck close to a yellow puck"
+    >>> obs, info = env.reset(seed=0)
+    >>> env.action_space.shape
+    (2,)
+    """
+
+    asset = "pushing.xml"
+    shape = "puck"
+    object_half_size = PUCK_HALF
+
+    def __init__(self, task="push_close", cameras=("front",), image_size=64, spread="seen", render_mode=None):
+        super().__init__(task, cameras, image_size, spread, render_mode)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+        m = self.model
+        self._mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "mocap")]
+        self._pusher = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "pusher")
+        self._pusher_qadr = m.jnt_qposadr[m.body_jntadr[self._pusher]]
+
+    def _initial_layout(self):
+        rng, w = self.np_random, 2 * PUCK_HALF
+        rel = self.task.relation
+        side = rng.choice([-1.0, 1.0])
+        if rel in ("close_to", "inside_of", "on_top_of", "below", "in_between"):
+            xs, ys = [side * 1.8 * w, -side * 1.8 * w, 0.0], [0.5 * w, 0.5 * w, 0.5 * w]
+        elif rel == "left_of":
+            xs, ys = [1.2 * w, -1.2 * w], [0.5 * w, 0.5 * w]
+        elif rel == "right_of":
+            xs, ys = [-1.2 * w, 1.2 * w], [0.5 * w, 0.5 * w]
+        elif rel == "in_front_of":
+            xs, ys = [-w, w], [1.6 * w, -0.2 * w]
+        else:  # behind
+            xs, ys = [-w, w], [-0.2 * w, 1.6 * w]
+        layout = {}
+        for colour, x, y in zip(self.task.objects, xs, ys):
+            dx, dy = rng.uniform(-self.spread_width, self.spread_width, 2)
+            layout[colour] = np.array([x + dx, y + dy, TABLE_TOP + PUCK_HALF_HEIGHT])
+        return layout
+
+    def _reset_agent(self):
+        rng = self.np_random
+        pos = np.array([rng.uniform(-0.2, 0.2), rng.uniform(-0.19, -0.13), PUSHER_Z])
+        self.data.mocap_pos[self._mocap] = pos
+        self.data.qpos[self._pusher_qadr:self._pusher_qadr + 3] = pos
+        self.data.qpos[self._pusher_qadr + 3:self._pusher_qadr + 7] = (1, 0, 0, 0)
+
+    @property
+    def pusher_position(self) -> np.ndarray:
+        return self.data.xpos[self._pusher].copy()
+
+    def _apply_action(self, action):
+        target = self.data.mocap_pos[self._mocap] + MAX_MOVE * np.array([action[0], action[1], 0.0])
+        target = np.clip(target, [X_RANGE[0], Y_RANGE[0], PUSHER_Z], [X_RANGE[1], Y_RANGE[1], PUSHER_Z])
+        self.data.mocap_pos[self._mocap] = target
+        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)

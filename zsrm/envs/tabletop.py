@@ -1,0 +1,146 @@
+"""Fetch-like tabletop: pick, carry, stack and place coloured blocks with a two-finger gripper."""
+from __future__ import annotations
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from zsrm.envs.base import TABLE_TOP, MujocoPixelEnv
+from zsrm.tasks.relations import RELATIONS
+
+BLOCK_HALF = 0.03
+MAX_MOVE = 0.03  # metres of gripper motion per step at |action| = 1
+# Gripper workspace (gripper body origin; fingertips reach 0.08 below it).
+X_RANGE = (-0.25, 0.25)
+Y_RANGE = (-0.16, 0.16)
+Z_RANGE = (TABLE_TOP + 0.084, TABLE_TOP + 0.33)
+FINGER_OPEN, FINGER_CLOSED = 0.0, 0.045
+
+
+class TabletopEnv(MujocoPixelEnv):
+    """Blocks on a table, a gripper driven by a mocap body. Observations: images only.
+
+    Actions in [-1, 1]: ``(dx, dz, grip)`` in the front camera's plane ("planar", the default
+    for relations the front camera reads) or ``(dx, dy, dz, grip)`` ("full", the default for
+    in front of / behind / close to / inside of). ``grip > 0`` closes the fingers; a block held
+    between closing fingers is welded to the gripper until they open (a grasp that does not slip).
+
+    >>> import gymnasium as gym, zsrm.envs
+    >>> env = gym.make("zsrm/Tabletop-v0", task="a yellow block on top of a red block")
+    >>> obs, info = env.reset(seed=0)
+    >>> obs["front"].shape, sorted(info["object_positions"])
+    ((64, 64, 3), ['red', 'yellow'])
+    """
+
+    asset = "tabletop.xml"
+    shape = "block"
+    object_half_size = BLOCK_HALF
+
+    def __init__(self, task="stack", cameras=("front",), image_size=64, spread="seen",
+                 action_mode: str | None = None, render_mode=None):
+        super().__init__(task, cameras, image_size, spread, render_mode)
+        if action_mode is None:
+            action_mode = "planar" if RELATIONS[self.task.relation].camera == "front" else "full"
+        if action_mode not in ("planar", "full"):
+            raise ValueError(f"unknown action_mode {action_mode!r}; choose 'planar' or 'full'")
+        self.action_mode = action_mode
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (3 if action_mode == "planar" else 4,), np.float32)
+        m = self.model
+        self._mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "mocap")]
+        self._gripper = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "gripper")
+        self._gripper_qadr = m.jnt_qposadr[m.body_jntadr[self._gripper]]
+        self._grasp_eq = {c: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f"grasp_{c}") for c in self.task.objects}
+        self.held: str | None = None
+
+    # --- layout ------------------------------------------------------------------------
+    def _initial_layout(self):
+        """Nominal start positions per relation, plus uniform noise of ``spread_width``."""
+        rng, w = self.np_random, 2 * BLOCK_HALF
+        rel, n = self.task.relation, len(self.task.objects)
+        side = rng.choice([-1.0, 1.0])
+        if rel == "left_of":
+            xs, ys = [1.5 * w, -1.5 * w], [0, 0]
+        elif rel == "right_of":
+            xs, ys = [-1.5 * w, 1.5 * w], [0, 0]
+        elif rel in ("on_top_of", "below"):
+            xs, ys = [side * 1.5 * w, -side * 1.5 * w], [0, 0]
+        elif rel == "in_between":
+            xs, ys = [side * 2.5 * w, -side * 2.5 * w, 0.0], [0, 0, 0]
+        elif rel == "in_front_of":
+            xs, ys = [-w, w], [1.3 * w, -1.3 * w]
+        elif rel == "behind":
+            xs, ys = [-w, w], [-1.3 * w, 1.3 * w]
+        else:  # close_to, inside_of
+            xs, ys = [side * 2 * w, -side * 2 * w], [0, 0]
+        planar = self.action_mode == "planar"
+        layout = {}
+        for colour, x, y in zip(self.task.objects, xs, ys):
+            dx, dy = rng.uniform(-self.spread_width, self.spread_width, 2)
+            layout[colour] = np.array([x + dx, y + (0.0 if planar else dy), TABLE_TOP + BLOCK_HALF])
+        assert len(layout) == n
+        return layout
+
+    def _reset_agent(self):
+        rng = self.np_random
+        y = 0.0 if self.action_mode == "planar" else rng.uniform(-0.08, 0.08)
+        pos = np.array([rng.uniform(-0.15, 0.15), y, rng.uniform(TABLE_TOP + 0.15, TABLE_TOP + 0.25)])
+        self.data.mocap_pos[self._mocap] = pos
+        self.data.qpos[self._gripper_qadr:self._gripper_qadr + 3] = pos
+        self.data.qpos[self._gripper_qadr + 3:self._gripper_qadr + 7] = (1, 0, 0, 0)
+        self.data.ctrl[:] = FINGER_OPEN
+        self.data.eq_active[list(self._grasp_eq.values())] = 0
+        self.held = None
+
+    # --- control -----------------------------------------------------------------------
+    @property
+    def gripper_position(self) -> np.ndarray:
+        return self.data.xpos[self._gripper].copy()
+
+    def _apply_action(self, action):
+        if self.action_mode == "planar":
+            delta = np.array([action[0], 0.0, action[1]])
+        else:
+            delta = action[:3].copy()
+        target = self.data.mocap_pos[self._mocap] + MAX_MOVE * delta
+        target = np.clip(target, [X_RANGE[0], Y_RANGE[0], Z_RANGE[0]], [X_RANGE[1], Y_RANGE[1], Z_RANGE[1]])
+        if self.action_mode == "planar":
+            target[1] = 0.0
+        self.data.mocap_pos[self._mocap] = target
+        closing = action[-1] > 0
+        if closing and self.held is None:
+            self.held = self._block_between_fingers()
+            if self.held is not None:
+                self._weld(self.held)
+        elif not closing and self.held is not None:
+            self.data.eq_active[self._grasp_eq[self.held]] = 0
+            self.held = None
+        # Fingers close onto a held block's faces, or fully when empty.
+        self.data.ctrl[:] = (0.053 - 0.008 - BLOCK_HALF) if self.held else (FINGER_CLOSED if closing else FINGER_OPEN)
+        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+
+    def _block_between_fingers(self) -> str | None:
+        g = self.gripper_position
+        for colour, p in self.object_positions().items():
+            d = p - g
+            if abs(d[0]) < 0.035 and abs(d[1]) < 0.03 and -0.075 < d[2] < -0.02:
+                return colour
+        return None
+
+    def _weld(self, colour: str):
+        """Weld the block to the gripper at their present relative pose."""
+        eq = self._grasp_eq[colour]
+        b = self._body(colour)
+        g_pos, g_quat = self.data.xpos[self._gripper], self.data.xquat[self._gripper]
+        b_pos, b_quat = self.data.xpos[b], self.data.xquat[b]
+        inv = np.zeros(4)
+        mujoco.mju_negQuat(inv, g_quat)
+        rel_pos = np.zeros(3)
+        mujoco.mju_rotVecQuat(rel_pos, b_pos - g_pos, inv)
+        rel_quat = np.zeros(4)
+        mujoco.mju_mulQuat(rel_quat, inv, b_quat)
+        # eq_data of a weld: anchor (3), relative position (3), relative quaternion (4), torquescale.
+        self.model.eq_data[eq, 0:3] = 0.0
+        self.model.eq_data[eq, 3:6] = rel_pos
+        self.model.eq_data[eq, 6:10] = rel_quat
+        self.model.eq_data[eq, 10] = 1.0
+        self.data.eq_active[eq] = 1

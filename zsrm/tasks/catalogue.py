@@ -1,0 +1,63 @@
+"""The tasks of the paper: the single tasks of Figures 4-6 and the 18 + 18 tasks of section 3.3."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import permutations
+
+from zsrm.tasks.language import GoalError, Task, parse_goal
+
+TRAIN_COLOURS = ("red", "green", "yellow")
+TEST_COLOUR = "blue"  # never seen by the multi-task policy in training
+MULTITASK_RELATIONS = ("on_top_of", "left_of", "right_of")  # stack, pick-place-left, pick-place-right
+
+
+@dataclass(frozen=True)
+class CatalogueEntry:
+    name: str
+    env_id: str
+    goal: str
+
+    @property
+    def task(self) -> Task | None:
+        """The spatial task, or None for goals that are not a relation (the pendulum)."""
+        return None if self.env_id == PENDULUM_ID else parse_goal(self.goal)
+
+
+TABLETOP_ID = "zsrm/Tabletop-v0"
+PUSHING_ID = "zsrm/Pushing-v0"
+PENDULUM_ID = "zsrm/DoublePendulum-v0"
+
+SINGLE_TASKS: dict[str, CatalogueEntry] = {
+    e.name: e
+    for e in (
+        CatalogueEntry("push_close", PUSHING_ID, "a blue puck close to a yellow puck"),
+        CatalogueEntry("stack", TABLETOP_ID, "a yellow block on top of a red block"),
+        CatalogueEntry("place_right", TABLETOP_ID, "a yellow block on the right of a red block"),
+        CatalogueEntry("place_left", TABLETOP_ID, "a yellow block on the left of a red block"),
+        CatalogueEntry("pendulum", PENDULUM_ID, "an inverted pendulum standing upright"),
+    )
+}
+
+
+def _multitask(pairs) -> list[Task]:
+    return [Task(rel, pair) for rel in MULTITASK_RELATIONS for pair in pairs]
+
+
+# 3 relations x 6 ordered pairs of the three training colours.
+TRAIN_TASKS: list[Task] = _multitask(list(permutations(TRAIN_COLOURS, 2)))
+# 3 relations x 6 ordered pairs of blue with one training colour.
+TEST_TASKS: list[Task] = _multitask(
+    [p for c in TRAIN_COLOURS for p in ((TEST_COLOUR, c), (c, TEST_COLOUR))]
+)
+
+
+def resolve(name_or_goal: str) -> CatalogueEntry:
+    """A catalogue name ("stack") or a goal sentence to the entry that runs it."""
+    if name_or_goal in SINGLE_TASKS:
+        return SINGLE_TASKS[name_or_goal]
+    try:
+        task = parse_goal(name_or_goal)
+    except GoalError as err:
+        raise GoalError(f"{err} (or name a catalogue task: {', '.join(SINGLE_TASKS)})") from None
+    env_id = PUSHING_ID if task.scene == "pushing" else TABLETOP_ID
+    return CatalogueEntry(task.text, env_id, task.text)
