@@ -11,6 +11,8 @@ import os
 from importlib import resources
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# Mesa's software renderer: small images render faster in the calling thread.
+os.environ.setdefault("LP_NUM_THREADS", "0")
 
 import gymnasium as gym
 import mujoco
@@ -41,6 +43,20 @@ def check_cameras(cameras) -> tuple[str, ...]:
     return cameras
 
 
+def check_colours(colours) -> tuple[str, ...]:
+    from zsrm.tasks.language import COLOURS
+
+    colours = tuple(colours or ())
+    if not colours:
+        raise ValueError("give a task, or the objects (colours) of an exploration scene")
+    for c in colours:
+        if c not in COLOURS:
+            raise GoalError(f"unknown colour {c!r}; known colours: {', '.join(COLOURS)}")
+    if len(set(colours)) != len(colours):
+        raise ValueError(f"objects must differ, got {', '.join(colours)}")
+    return colours
+
+
 def as_task(task, shape: str) -> Task:
     """A Task from a Task, a goal sentence or a catalogue name; checks it suits the scene."""
     if isinstance(task, str):
@@ -63,12 +79,14 @@ class MujocoPixelEnv(gym.Env):
     frame_skip = 10  # 10 x 4 ms = one 0.04 s control step
 
     def __init__(self, task, cameras=("front",), image_size: int = 64, spread: str = "seen",
-                 render_mode: str | None = None):
+                 render_mode: str | None = None, objects=None):
         if spread not in SPREADS:
             raise ValueError(f"unknown spread {spread!r}; choose one of {', '.join(SPREADS)}")
         if not isinstance(image_size, (int, np.integer)) or not 16 <= image_size <= 512:
             raise ValueError(f"image_size must be an integer in [16, 512], got {image_size!r}")
-        self.task = as_task(task, self.shape)
+        # task=None: exploration mode, ``objects`` (colours) at random places, no oracle.
+        self.task = None if task is None else as_task(task, self.shape)
+        self.objects = self.task.objects if self.task else check_colours(objects)
         self.cameras = check_cameras(cameras)
         self.image_size = int(image_size)
         self.spread = spread
@@ -96,7 +114,7 @@ class MujocoPixelEnv(gym.Env):
 
         self._all_colours = COLOURS
         for i, colour in enumerate(COLOURS):
-            if colour in self.task.objects:
+            if colour in self.objects:
                 continue
             body = self._body(colour)
             for g in range(self.model.body_geomadr[body], self.model.body_geomadr[body] + self.model.body_geomnum[body]):
@@ -108,7 +126,7 @@ class MujocoPixelEnv(gym.Env):
 
     def object_positions(self) -> dict[str, np.ndarray]:
         """True world positions of the task's objects, keyed by colour."""
-        return {c: self.data.xpos[self._body(c)].copy() for c in self.task.objects}
+        return {c: self.data.xpos[self._body(c)].copy() for c in self.objects}
 
     def _set_object(self, colour: str, xyz):
         adr = self._qpos_adr(colour)
@@ -117,11 +135,13 @@ class MujocoPixelEnv(gym.Env):
 
     def _park_unused(self):
         for i, colour in enumerate(self._all_colours):
-            if colour not in self.task.objects:
+            if colour not in self.objects:
                 self._set_object(colour, (2.0 + i, 2.0, 0.1))
 
     # --- oracle ------------------------------------------------------------------------
     def oracle_success(self) -> bool:
+        if self.task is None:
+            return False
         pos = self.object_positions()
         return bool(holds_in_world(self.task.relation, [pos[c] for c in self.task.objects], WORLD_THRESHOLDS))
 
@@ -144,6 +164,8 @@ class MujocoPixelEnv(gym.Env):
 
     def _sample_layout(self) -> dict[str, np.ndarray]:
         """Initial positions that do not overlap and are not already in the goal relation."""
+        if self.task is None:
+            return self._random_layout()
         rel = self.task.relation
         for _ in range(1000):
             layout = self._initial_layout()
@@ -157,6 +179,23 @@ class MujocoPixelEnv(gym.Env):
 
     def _initial_layout(self) -> dict[str, np.ndarray]:
         raise NotImplementedError
+
+    def _random_layout(self, p_stack: float = 0.25) -> dict[str, np.ndarray]:
+        """Exploration: objects anywhere on the table; blocks sometimes start stacked."""
+        rng, h = self.np_random, self.object_half_size
+        layout: dict[str, np.ndarray] = {}
+        for colour in self.objects:
+            if layout and self.shape == "block" and rng.random() < p_stack:
+                base = layout[list(layout)[rng.integers(len(layout))]]
+                if not any(np.allclose(p[:2], base[:2]) and p[2] > base[2] for p in layout.values()):
+                    layout[colour] = base + (*rng.uniform(-0.3 * h, 0.3 * h, 2), 2 * h)
+                    continue
+            for _ in range(1000):
+                p = np.array([rng.uniform(-0.22, 0.22), rng.uniform(-0.14, 0.14), TABLE_TOP + self._rest_height])
+                if all(np.linalg.norm(p[:2] - q[:2]) > 2.6 * h for q in layout.values()):
+                    break
+            layout[colour] = p
+        return layout
 
     # --- gym API -----------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):

@@ -31,8 +31,11 @@ class PushingEnv(MujocoPixelEnv):
     shape = "puck"
     object_half_size = PUCK_HALF
 
-    def __init__(self, task="push_close", cameras=("front",), image_size=64, spread="seen", render_mode=None):
-        super().__init__(task, cameras, image_size, spread, render_mode)
+    _rest_height = PUCK_HALF_HEIGHT
+
+    def __init__(self, task="push_close", cameras=("front",), image_size=64, spread="seen", render_mode=None,
+                 objects=None):
+        super().__init__(task, cameras, image_size, spread, render_mode, objects)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
         m = self.model
         self._mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "mocap")]

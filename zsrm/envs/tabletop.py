@@ -36,11 +36,14 @@ class TabletopEnv(MujocoPixelEnv):
     shape = "block"
     object_half_size = BLOCK_HALF
 
+    _rest_height = BLOCK_HALF
+
     def __init__(self, task="stack", cameras=("front",), image_size=64, spread="seen",
-                 action_mode: str | None = None, render_mode=None):
-        super().__init__(task, cameras, image_size, spread, render_mode)
+                 action_mode: str | None = None, render_mode=None, objects=None):
+        super().__init__(task, cameras, image_size, spread, render_mode, objects)
         if action_mode is None:
-            action_mode = "planar" if RELATIONS[self.task.relation].camera == "front" else "full"
+            planar = self.task is not None and RELATIONS[self.task.relation].camera == "front"
+            action_mode = "planar" if planar else "full"
         if action_mode not in ("planar", "full"):
             raise ValueError(f"unknown action_mode {action_mode!r}; choose 'planar' or 'full'")
         self.action_mode = action_mode
@@ -49,7 +52,7 @@ class TabletopEnv(MujocoPixelEnv):
         self._mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "mocap")]
         self._gripper = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "gripper")
         self._gripper_qadr = m.jnt_qposadr[m.body_jntadr[self._gripper]]
-        self._grasp_eq = {c: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f"grasp_{c}") for c in self.task.objects}
+        self._grasp_eq = {c: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f"grasp_{c}") for c in self.objects}
         self.held: str | None = None
 
     # --- layout ------------------------------------------------------------------------
