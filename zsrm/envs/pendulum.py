@@ -30,8 +30,11 @@ class DoublePendulumPixelEnv(gym.Env):
         self.cameras = ("front",)
         self.image_size = int(image_size)
         self.render_mode = render_mode
-        self._env = gym.make("InvertedDoublePendulum-v5", render_mode="rgb_array",
-                             width=self.image_size, height=self.image_size)
+        # A fixed side view framing the rail and both poles (the default one is far away).
+        camera = {"trackbodyid": -1, "distance": 2.8, "lookat": np.array([0.0, 0.0, 0.5]),
+                  "elevation": 0.0, "azimuth": 90.0}
+        self._env = gym.make("InvertedDoublePendulum-v5", render_mode="rgb_array", width=self.image_size,
+                             height=self.image_size, default_camera_config=camera)
         self.action_space = self._env.action_space
         self.observation_space = gym.spaces.Dict(
             {"front": gym.spaces.Box(0, 255, (self.image_size, self.image_size, 3), np.uint8)}
