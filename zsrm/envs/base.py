@@ -76,7 +76,7 @@ class MujocoPixelEnv(gym.Env):
     asset: str
     shape: str  # "block" or "puck": the object bodies are named f"{shape}_{colour}"
     object_half_size: float
-    frame_skip = 10  # 10 x 4 ms = one 0.04 s control step
+    frame_skip = 8  # 8 x 5 ms = one 0.04 s control step
 
     def __init__(self, task, cameras=("front",), image_size: int = 64, spread: str = "seen",
                  render_mode: str | None = None, objects=None):

@@ -1,0 +1,81 @@
+"""Where world points land in a camera's image: pinhole projection with MuJoCo's camera pose.
+
+Pixel coordinates are ``(x, row)``: x to the right, row down, in pixel-index units (the centre
+of the top-left pixel is ``(0, 0)``, of the bottom-right one ``(size - 1, size - 1)``), the
+frame of ``env.render_cameras`` images and of Grad-CAM coordinates.
+
+>>> import gymnasium as gym, zsrm.envs
+>>> env = gym.make("zsrm/Tabletop-v0", task="stack", cameras=("front",))
+>>> obs, info = env.reset(seed=0)
+>>> xy = project(env.unwrapped, "front", info["object_positions"]["red"], size=64)
+>>> xy.shape
+(2,)
+"""
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from zsrm.envs.base import TABLE_TOP
+from zsrm.tasks.relations import CAMERAS
+
+
+def _camera_id(model: mujoco.MjModel, camera: str) -> int:
+    cam = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+    if cam < 0:
+        raise ValueError(f"unknown camera {camera!r}; known cameras: {', '.join(CAMERAS)}")
+    return cam
+
+
+def camera_frame(env, camera: str) -> tuple[np.ndarray, np.ndarray, float]:
+    """Camera position (3,), rotation (3, 3) whose columns are the camera's x (right), y (up)
+    and z (backward) axes in world coordinates, and the vertical field of view in degrees."""
+    base = getattr(env, "unwrapped", env)
+    cam = _camera_id(base.model, camera)
+    # cam_xpos/cam_xmat are only filled by mj_forward/mj_step; recompute them from the pose the
+    # model gives (the scenes' cameras are fixed to the world body).
+    pos = base.data.cam_xpos[cam].copy()
+    rot = base.data.cam_xmat[cam].reshape(3, 3).copy()
+    if not np.any(rot):
+        mujoco.mj_kinematics(base.model, base.data)
+        mujoco.mj_camlight(base.model, base.data)
+        pos = base.data.cam_xpos[cam].copy()
+        rot = base.data.cam_xmat[cam].reshape(3, 3).copy()
+    return pos, rot, float(base.model.cam_fovy[cam])
+
+
+def project(env, camera: str, xyz, size: int) -> np.ndarray:
+    """World points ``(..., 3)`` to pixel coordinates ``(..., 2)`` (x right, row down) in a
+    square ``size`` x ``size`` image of ``camera``. Points behind the camera give NaN."""
+    pos, rot, fovy = camera_frame(env, camera)
+    p = np.asarray(xyz, dtype=np.float64)
+    local = (p - pos) @ rot  # coordinates along the camera's x, y, z axes
+    depth = -local[..., 2]  # MuJoCo cameras look down their -z axis
+    focal = 0.5 * size / np.tan(np.deg2rad(fovy) / 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = 0.5 * size + focal * local[..., 0] / depth - 0.5
+        v = 0.5 * size - focal * local[..., 1] / depth - 0.5
+    out = np.stack([u, v], axis=-1)
+    out[depth <= 0] = np.nan
+    return out
+
+
+def object_width_px(env, camera: str, size: int, half_size: float | None = None,
+                    at=(0.0, 0.0, None)) -> float:
+    """Width in pixels of one object (2 * ``half_size`` metres, the scene's object by default)
+    seen by ``camera``, measured along the image's x axis at the table centre."""
+    base = getattr(env, "unwrapped", env)
+    half = base.object_half_size if half_size is None else half_size
+    centre = np.array([at[0], at[1], TABLE_TOP + half if at[2] is None else at[2]])
+    _, rot, _ = camera_frame(base, camera)
+    right = rot[:, 0]
+    a, b = project(base, camera, np.stack([centre - half * right, centre + half * right]), size)
+    return float(np.linalg.norm(a - b))
+
+
+def object_pixels(env, cameras=CAMERAS, size: int | None = None) -> dict[str, dict[str, np.ndarray]]:
+    """True pixel coordinates of every object of a scene: ``{camera: {colour: (x, row)}}``."""
+    base = getattr(env, "unwrapped", env)
+    size = size or base.image_size
+    positions = base.object_positions()
+    return {cam: {c: project(base, cam, p, size) for c, p in positions.items()} for cam in cameras}
