@@ -19,7 +19,7 @@ import mujoco
 import numpy as np
 
 from zsrm.tasks.catalogue import SINGLE_TASKS
-from zsrm.tasks.language import GoalError, Task, parse_goal
+from zsrm.tasks.language import COLOURS, GoalError, Task, parse_goal
 from zsrm.tasks.relations import CAMERAS, WORLD_THRESHOLDS, holds_in_world
 
 TABLE_TOP = 0.4
@@ -44,8 +44,6 @@ def check_cameras(cameras) -> tuple[str, ...]:
 
 
 def check_colours(colours) -> tuple[str, ...]:
-    from zsrm.tasks.language import COLOURS
-
     colours = tuple(colours or ())
     if not colours:
         raise ValueError("give a task, or the objects (colours) of an exploration scene")
@@ -110,9 +108,6 @@ class MujocoPixelEnv(gym.Env):
         return self.model.jnt_qposadr[self.model.body_jntadr[self._body(colour)]]
 
     def _hide_unused_objects(self):
-        from zsrm.tasks.language import COLOURS
-
-        self._all_colours = COLOURS
         for i, colour in enumerate(COLOURS):
             if colour in self.objects:
                 continue
@@ -134,7 +129,7 @@ class MujocoPixelEnv(gym.Env):
         self.data.qpos[adr + 3:adr + 7] = (1, 0, 0, 0)
 
     def _park_unused(self):
-        for i, colour in enumerate(self._all_colours):
+        for i, colour in enumerate(COLOURS):
             if colour not in self.objects:
                 self._set_object(colour, (2.0 + i, 2.0, 0.1))
 
