@@ -16,6 +16,8 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 COMMAND_MODULES = [
     "zsrm.envs.commands",  # render, scripted-eval
     "zsrm.demo",  # demo
+    "zsrm.vlm.commands",  # pretrain-vlm, eval-vlm
+    "zsrm.rewards.commands",  # reward, reward-curve
 ]
 
 
