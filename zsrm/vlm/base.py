@@ -19,8 +19,16 @@ ImageBatch = "np.ndarray | Sequence[np.ndarray] | Sequence[PIL.Image.Image] | to
 
 
 class VisionLanguageModel(nn.Module, ABC):
+    """Image tower, text tower and a dot product; see :func:`zsrm.vlm.load_vlm`.
+
+    ``logit_scale`` is the learnable log temperature of contrastive training (CLIP's), so
+    ``logit_scale.exp() * image @ text.T`` are the logits of a batch.
+    """
+
     backend: str  # "open_clip" or "scene"
     gradcam_layer: str  # name of the module whose output Grad-CAM reads
+    image_size: int  # side of the square input that preprocess produces
+    logit_scale: nn.Parameter
 
     @abstractmethod
     def preprocess(self, images: ImageBatch) -> torch.Tensor:
@@ -48,12 +56,118 @@ class VisionLanguageModel(nn.Module, ABC):
         emb = self.image_head(self.image_trunk(pixels))
         return nn.functional.normalize(emb, dim=-1) if normalize else emb
 
+    def similarity(self, images: ImageBatch, texts: Sequence[str]) -> torch.Tensor:
+        """Cosine similarities (N images, M texts): the base reward of paper section 2.1."""
+        return self.encode_images(images) @ self.encode_texts(texts).T
+
     def encode_texts(self, texts: Sequence[str], normalize: bool = True) -> torch.Tensor:
         if isinstance(texts, str):
             texts = [texts]
         texts = list(texts)
+        if not texts:
+            raise ValueError("no texts given: pass one or more non-empty strings")
         for t in texts:
             if not isinstance(t, str) or not t.strip():
                 raise ValueError("texts must be non-empty strings")
         emb = self.encode_text_tokens(texts)
         return nn.functional.normalize(emb, dim=-1) if normalize else emb
+
+
+def image_batch(images: ImageBatch) -> list[np.ndarray]:
+    """Check images and return them as a list of uint8 (H, W, 3) arrays.
+
+    Accepts one uint8 HWC array, an NHWC batch, a list of such arrays, PIL images (converted
+    to RGB) or uint8 torch tensors laid out the same way. Anything else raises ValueError
+    with the reason, because a float or CHW image silently rescaled would give wrong rewards.
+
+    >>> [a.shape for a in image_batch(np.zeros((2, 64, 64, 3), np.uint8))]
+    [(64, 64, 3), (64, 64, 3)]
+    >>> image_batch(np.zeros((64, 64), np.uint8))
+    Traceback (most recent call last):
+    ...
+    ValueError: images must be uint8 RGB arrays of shape (H, W, 3) or (N, H, W, 3), got a 2-D array of shape (64, 64)
+    """
+    if isinstance(images, torch.Tensor):
+        images = images.detach().cpu().numpy()
+    if isinstance(images, np.ndarray):
+        if images.ndim == 4:
+            return [_check_image(im, f"image {i}") for i, im in enumerate(_check_dtype(images))]
+        return [_check_image(images, "image")]
+    if _is_pil(images):
+        return [np.asarray(images.convert("RGB"))]
+    if isinstance(images, (str, bytes)) or not isinstance(images, Sequence):
+        raise ValueError(f"images must be uint8 arrays, PIL images or a list of them, got {type(images).__name__}")
+    if len(images) == 0:
+        raise ValueError("no images given")
+    out = []
+    for i, im in enumerate(images):
+        if _is_pil(im):
+            out.append(np.asarray(im.convert("RGB")))
+        elif isinstance(im, (np.ndarray, torch.Tensor)):
+            im = im.detach().cpu().numpy() if isinstance(im, torch.Tensor) else im
+            out.append(_check_image(im, f"image {i}"))
+        else:
+            raise ValueError(f"image {i} must be a uint8 array or a PIL image, got {type(im).__name__}")
+    return out
+
+
+def _is_pil(obj) -> bool:
+    try:
+        from PIL import Image
+    except ImportError:  # pragma: no cover - pillow is a dependency
+        return False
+    return isinstance(obj, Image.Image)
+
+
+def _check_dtype(a: np.ndarray) -> np.ndarray:
+    if a.dtype != np.uint8:
+        raise ValueError(
+            f"images must be uint8 with values 0-255, got dtype {a.dtype}; "
+            "convert with (img * 255).round().astype(np.uint8) if yours are floats in [0, 1]"
+        )
+    return a
+
+
+def _check_image(a: np.ndarray, what: str) -> np.ndarray:
+    if a.ndim != 3:
+        raise ValueError(
+            f"images must be uint8 RGB arrays of shape (H, W, 3) or (N, H, W, 3), got a {a.ndim}-D array of shape {a.shape}"
+        )
+    if a.shape[-1] != 3:
+        hint = " (channels first? pass H, W, 3)" if a.shape[0] == 3 else ""
+        raise ValueError(f"{what} must have 3 colour channels (RGB) last, got shape {a.shape}{hint}")
+    if min(a.shape[:2]) < 8:
+        raise ValueError(f"{what} is too small: {a.shape[0]}x{a.shape[1]} pixels")
+    return _check_dtype(a)
+
+
+def pixels_from_images(images: ImageBatch, size: int, mean, std, crop: bool = True,
+                       device: torch.device | str = "cpu") -> torch.Tensor:
+    """uint8 images -> normalised float pixels (N, 3, size, size).
+
+    Square images are resized; others are resized on their short side and centre-cropped
+    (``crop=True``, CLIP's "shortest" mode) or squashed (``crop=False``).
+    """
+    arrays = image_batch(images)
+    mean_t = torch.tensor(mean, dtype=torch.float32, device=device).view(1, 3, 1, 1)
+    std_t = torch.tensor(std, dtype=torch.float32, device=device).view(1, 3, 1, 1)
+    out = torch.empty(len(arrays), 3, size, size, device=device)
+    # Resize images of one shape together: the common case is one NHWC batch.
+    by_shape: dict[tuple, list[int]] = {}
+    for i, a in enumerate(arrays):
+        by_shape.setdefault(a.shape, []).append(i)
+    for shape, idx in by_shape.items():
+        x = torch.from_numpy(np.stack([arrays[i] for i in idx])).to(device).permute(0, 3, 1, 2).float() / 255.0
+        h, w = shape[:2]
+        if (h, w) != (size, size):
+            if crop and h != w:
+                scale = size / min(h, w)
+                nh, nw = max(size, round(h * scale)), max(size, round(w * scale))
+                x = nn.functional.interpolate(x, (nh, nw), mode="bicubic", antialias=True, align_corners=False)
+                top, left = (nh - size) // 2, (nw - size) // 2
+                x = x[:, :, top:top + size, left:left + size]
+            else:
+                x = nn.functional.interpolate(x, (size, size), mode="bicubic", antialias=True, align_corners=False)
+            x = x.clamp(0.0, 1.0)
+        out[idx] = (x - mean_t) / std_t
+    return out

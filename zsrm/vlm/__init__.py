@@ -1,0 +1,21 @@
+"""Vision-language models: an image tower, a text tower and a dot product (paper section 2.1).
+
+>>> from zsrm.vlm import load_vlm
+>>> vlm = load_vlm("scene")  # doctest: +SKIP
+>>> reward = vlm.similarity(obs["front"], ["a yellow block on top of a red block"])  # doctest: +SKIP
+
+Backends: ``scene`` (offline stand-in for CLIP, trained by ``zsrm pretrain-vlm``) and
+``open_clip`` (RN50 with OpenAI's weights is the paper's model). The ``open_clip`` package
+itself is imported only when an open_clip model is asked for (it takes seconds).
+"""
+from zsrm.vlm.base import VisionLanguageModel, image_batch, pixels_from_images
+from zsrm.vlm.factory import SHIPPED_SCENE_DIR, load_folder, load_vlm
+from zsrm.vlm.losses import multi_positive_contrastive_loss
+from zsrm.vlm.openclip import OpenClipVLM, WeightsUnavailableError, create_open_clip_vlm
+from zsrm.vlm.scene import SCENE_PRESETS, SceneConfig, SceneVLM, create_scene_vlm
+
+__all__ = [
+    "VisionLanguageModel", "SceneVLM", "SceneConfig", "SCENE_PRESETS", "OpenClipVLM", "WeightsUnavailableError",
+    "load_vlm", "load_folder", "create_scene_vlm", "create_open_clip_vlm", "multi_positive_contrastive_loss",
+    "image_batch", "pixels_from_images", "SHIPPED_SCENE_DIR",
+]

@@ -1,0 +1,143 @@
+"""``zsrm eval-vlm``: zero-shot object presence on held-out renders.
+
+For every image and colour c the probe is "a c block" (or "a c puck" in the pushing scene);
+the score is its cosine similarity minus the mean similarity of the other colours' probes
+(a relative score, as CLIP's zero-shot classifiers compare classes, which removes how
+"similar to everything" an image is). AUROC of that score against whether c's object is
+visible gives one number per colour.
+
+Truth comes from MuJoCo's segmentation: visible means at least ``MIN_VISIBLE_PIXELS`` pixels
+(at 64 px). Objects showing 1 to ``MIN_VISIBLE_PIXELS - 1`` pixels are neither clearly present
+nor absent; they are left out of that colour's AUROC and counted in the meta.
+"""
+from __future__ import annotations
+
+import json
+import math
+import platform
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from zsrm.tasks.language import COLOURS
+from zsrm.tasks.relations import CAMERAS
+from zsrm.vlm.base import VisionLanguageModel
+from zsrm.vlm.presence import SCENES, SHAPES, min_visible_pixels, probe_text, render_presence_scenes
+
+
+def presence_scores(vlm: VisionLanguageModel, images: np.ndarray, shapes: np.ndarray,
+                    batch_size: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """(relative scores, raw cosine similarities), both (N, 4) in COLOURS order.
+
+    ``shapes[i]`` is 0 for a tabletop image (block probes), 1 for a pushing image (puck probes).
+    """
+    probes = {k: vlm.encode_texts([probe_text(c, SHAPES[s]) for c in COLOURS]) for k, s in enumerate(SCENES)}
+    sims = np.zeros((len(images), len(COLOURS)), np.float32)
+    with torch.no_grad():
+        for lo in range(0, len(images), batch_size):
+            emb = vlm.encode_images(images[lo:lo + batch_size])
+            for k in probes:
+                rows = np.flatnonzero(shapes[lo:lo + batch_size] == k)
+                if len(rows):
+                    sims[lo + rows] = (emb[rows] @ probes[k].T).cpu().numpy()
+    others = (sims.sum(axis=1, keepdims=True) - sims) / (len(COLOURS) - 1)
+    return sims - others, sims
+
+
+def _auroc(truth: np.ndarray, score: np.ndarray) -> float:
+    from sklearn.metrics import roc_auc_score
+
+    if truth.all() or not truth.any():
+        return float("nan")  # undefined with one class only
+    return float(roc_auc_score(truth, score))
+
+
+def presence_eval(vlm: VisionLanguageModel, n_images: int = 500, seed: int = 0, image_size: int = 64,
+                  progress: bool = True) -> tuple[dict, dict]:
+    """Render ``n_images`` held-out images (eval seed stream) and score presence.
+
+    Returns (result JSON dict, arrays for plotting).
+    """
+    from tqdm import tqdm
+
+    n_scenes = math.ceil(n_images / len(CAMERAS))
+    with tqdm(total=n_scenes, desc="render held-out scenes", unit="scene", disable=not progress) as bar:
+        data = render_presence_scenes(range(n_scenes), seed=seed, stream="eval", size=image_size, progress=bar.update)
+    data = {k: v[:n_images] for k, v in data.items()}
+    scores, sims = presence_scores(vlm, data["images"], data["shape"])
+    threshold = min_visible_pixels(image_size)
+    present = data["visible"] >= threshold
+    absent = data["visible"] == 0
+    used = present | absent
+
+    result: dict = {}
+    raw, by_camera, by_scene, counts = {}, {}, {}, {}
+    for j, c in enumerate(COLOURS):
+        m = used[:, j]
+        result[f"auroc.{c}"] = round(_auroc(present[m, j], scores[m, j]), 4)
+        raw[c] = round(_auroc(present[m, j], sims[m, j]), 4)
+        by_camera[c] = {cam: round(_auroc(present[m & (data["camera"] == k), j], scores[m & (data["camera"] == k), j]), 4)
+                        for k, cam in enumerate(CAMERAS)}
+        by_scene[c] = {s: round(_auroc(present[m & (data["shape"] == k), j], scores[m & (data["shape"] == k), j]), 4)
+                       for k, s in enumerate(SCENES)}
+        counts[c] = {"present": int(present[:, j].sum()), "absent": int(absent[:, j].sum()),
+                     "left_out_partly_visible": int((~used[:, j]).sum())}
+    result["meta"] = {
+        "n_images": int(n_images),
+        "n_scenes": int(n_scenes),
+        "cameras": list(CAMERAS),
+        "scenes": {s: int((data["shape"] == k).sum()) for k, s in enumerate(SCENES)},
+        "image_size": image_size,
+        "seed": seed,
+        "held_out": "eval seed stream (numpy SeedSequence [1, seed, scene]); training renders use [0, seed, scene]",
+        "score": "cos(image, 'a C block|puck') minus the mean cos of the other three colours' probes",
+        "truth": f"object visible with >= {threshold} pixels (MuJoCo segmentation); 1-{threshold - 1} px left out",
+        "counts": counts,
+        "auroc_raw_cosine": raw,
+        "auroc_by_camera": by_camera,
+        "auroc_by_scene": by_scene,
+        "vlm": getattr(vlm, "meta", {}) if vlm.backend == "scene" else {"pretrained": getattr(vlm, "pretrained", None)},
+        "machine": platform.platform(),
+    }
+    return result, {"scores": scores, "present": present, "used": used}
+
+
+def plot_presence(arrays: dict, result: dict, path: Path) -> Path:
+    """ROC curves per colour (left) and score histograms, present against absent (right)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from sklearn.metrics import roc_curve
+
+    colours = {"red": "#d62728", "green": "#2ca02c", "yellow": "#e6b800", "blue": "#1f77b4"}
+    fig, (ax_roc, ax_hist) = plt.subplots(1, 2, figsize=(10, 4.2))
+    for j, c in enumerate(COLOURS):
+        m = arrays["used"][:, j]
+        truth, score = arrays["present"][m, j], arrays["scores"][m, j]
+        if truth.any() and not truth.all():
+            fpr, tpr, _ = roc_curve(truth, score)
+            ax_roc.plot(fpr, tpr, color=colours[c], label=f"{c}: AUROC {result[f'auroc.{c}']:.3f}")
+        ax_hist.hist(score[truth], bins=30, alpha=0.45, color=colours[c], histtype="stepfilled")
+        ax_hist.hist(score[~truth], bins=30, color=colours[c], histtype="step", linestyle="--")
+    ax_roc.plot([0, 1], [0, 1], color="grey", lw=0.8, ls=":")
+    ax_roc.set(xlabel="false positive rate", ylabel="true positive rate", title="zero-shot presence (ROC)")
+    ax_roc.legend(loc="lower right")
+    ax_hist.set(xlabel="score: cos(probe) - mean cos(other colours)", ylabel="images",
+                title="filled: object visible, dashed: absent")
+    n = result["meta"]["n_images"]
+    fig.suptitle(f"scene VLM presence probes on {n} held-out renders (3 cameras, blocks and pucks)", fontsize=10)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def write_presence_results(result: dict, arrays: dict, out: Path) -> tuple[Path, Path]:
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    png = plot_presence(arrays, result, out.with_suffix(".png"))
+    return out, png
