@@ -18,6 +18,7 @@ COMMAND_MODULES = [
     "zsrm.demo",  # demo
     "zsrm.vlm.commands",  # pretrain-vlm, eval-vlm
     "zsrm.rewards.commands",  # reward, reward-curve
+    "zsrm.reward_model.commands",  # finetune, eval-reward
 ]
 
 

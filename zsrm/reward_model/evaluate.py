@@ -1,0 +1,187 @@
+"""``zsrm eval-reward``: the rewards against the oracle on held-out frames, per task.
+
+Frames come from the task's own scene, from episodes none of the training data saw: scripted
+episodes (a true-state controller carries the task out, so the goal is reached) and
+random-action episodes (mostly not). The label of a frame is the oracle's ``is_success``.
+Each reward is scored on the camera the goal's relation is read on.
+
+Reported per task and reward: precision, recall and F1 of the binarised reward (1 when the
+goal text beats its negatives), AUROC of the raw score (the cosine of the frame and the goal
+text) and of the margin over the best negative. The base reward (the VLM before
+fine-tuning) is binarised by the same argmax rule, so both are read the same way;
+``f1_best_threshold`` is the F1 of the raw score at the threshold that is best *on these very
+labels*: a privileged upper bound for any threshold, not something a user could tune.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from zsrm.tasks.catalogue import SINGLE_TASKS
+from zsrm.tasks.relations import RELATIONS
+
+EVAL_TASKS = ("stack", "place_left", "place_right", "push_close")
+
+
+@dataclass
+class EvalFrames:
+    """Frames of one task's camera with the oracle's labels."""
+
+    task: str
+    goal: str
+    camera: str
+    images: np.ndarray  # (N, H, W, 3) uint8
+    success: np.ndarray  # (N,) bool, info["is_success"]
+    source: np.ndarray  # (N,) "scripted" or "random"
+    episode: np.ndarray  # (N,) episode seed
+    step: np.ndarray = field(default=None)  # (N,) step within the episode
+
+    def __len__(self) -> int:
+        return len(self.success)
+
+
+def task_camera(task: str) -> str:
+    entry = _entry(task)
+    return RELATIONS[entry.task.relation].camera
+
+
+def _entry(task: str):
+    if task not in SINGLE_TASKS or SINGLE_TASKS[task].task is None:
+        known = [k for k, e in SINGLE_TASKS.items() if e.task is not None]
+        raise ValueError(f"unknown spatial task {task!r}; known: {', '.join(known)}")
+    return SINGLE_TASKS[task]
+
+
+def rollout_frames(task: str, scripted_episodes: int = 10, random_episodes: int = 10, seed: int = 10_000,
+                   every: int = 2, image_size: int = 64, progress: bool = True) -> EvalFrames:
+    """Frames every ``every`` steps (and the reset frame) of scripted and random episodes.
+
+    Episode seeds are ``seed + i``; scripted and random episodes use different seeds.
+    """
+    from tqdm import tqdm
+
+    from zsrm.envs.commands import make_env
+    from zsrm.envs.scripted import scripted_controller
+
+    if scripted_episodes < 0 or random_episodes < 0 or scripted_episodes + random_episodes == 0:
+        raise ValueError("need at least one episode (scripted or random)")
+    if every < 1:
+        raise ValueError(f"every must be >= 1, got {every}")
+    entry = _entry(task)
+    camera = task_camera(task)
+    env = make_env(task, cameras=(camera,), image_size=image_size)
+    images, success, source, episodes, steps = [], [], [], [], []
+    plan = [("scripted", seed + i) for i in range(scripted_episodes)]
+    plan += [("random", seed + scripted_episodes + i) for i in range(random_episodes)]
+    try:
+        for kind, ep_seed in tqdm(plan, desc=f"eval frames {task}", unit="episode", disable=not progress):
+            obs, info = env.reset(seed=ep_seed)
+            env.action_space.seed(ep_seed)
+            policy = scripted_controller(env) if kind == "scripted" else env.action_space.sample
+            t = 0
+            while True:
+                if t % every == 0:
+                    images.append(obs[camera])
+                    success.append(bool(info["is_success"]))
+                    source.append(kind)
+                    episodes.append(ep_seed)
+                    steps.append(t)
+                obs, _, terminated, truncated, info = env.step(policy())
+                t += 1
+                if terminated or truncated:
+                    break
+    finally:
+        env.close()
+    return EvalFrames(task, entry.goal, camera, np.stack(images), np.array(success), np.array(source),
+                      np.array(episodes), np.array(steps))
+
+
+def binary_metrics(predicted, truth) -> dict:
+    """Precision, recall and F1 of binary predictions (0 where undefined), and the counts."""
+    p, t = np.asarray(predicted, bool), np.asarray(truth, bool)
+    tp, fp, fn = int((p & t).sum()), int((p & ~t).sum()), int((~p & t).sum())
+    precision = tp / (tp + fp) if tp + fp else 0.0
+    recall = tp / (tp + fn) if tp + fn else 0.0
+    f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
+    return {"precision": precision, "recall": recall, "f1": f1, "accuracy": float((p == t).mean()),
+            "predicted_positive": int(p.sum())}
+
+
+def auroc(scores, truth) -> float:
+    """Area under the ROC curve; NaN when only one class is present."""
+    from sklearn.metrics import roc_auc_score
+
+    t = np.asarray(truth, bool)
+    if t.all() or not t.any():
+        return float("nan")
+    return float(roc_auc_score(t, np.asarray(scores, np.float64)))
+
+
+def best_threshold_f1(scores, truth) -> float:
+    """The highest F1 of ``scores > threshold`` over all thresholds (privileged: uses the labels)."""
+    from sklearn.metrics import precision_recall_curve
+
+    t = np.asarray(truth, bool)
+    if not t.any():
+        return float("nan")
+    precision, recall, _ = precision_recall_curve(t, np.asarray(scores, np.float64))
+    f1 = np.where(precision + recall > 0, 2 * precision * recall / np.maximum(precision + recall, 1e-12), 0.0)
+    return float(f1.max())
+
+
+def reward_metrics(binary, raw, margin, truth) -> dict:
+    out = binary_metrics(np.asarray(binary) > 0.5, truth)
+    out.update(auroc=auroc(raw, truth), auroc_margin=auroc(margin, truth),
+               f1_best_threshold=best_threshold_f1(raw, truth))
+    return out
+
+
+def score_frames(reward, frames: EvalFrames) -> dict[str, np.ndarray]:
+    """Binary, raw and margin outputs of a :class:`~zsrm.rewards.zsrm.ZSRMReward` on the frames."""
+    sims = reward.similarities(frames.images, frames.goal)
+    return {"binary": (sims.argmax(axis=1) == 0).astype(np.float32), "raw": sims[:, 0],
+            "margin": sims[:, 0] - sims[:, 1:].max(axis=1)}
+
+
+def evaluate_rewards(models: dict, frames_by_task: dict[str, EvalFrames], raw_scores: dict | None = None) -> dict:
+    """``models``: name -> ZSRMReward. Returns name -> task -> metrics (plus frame counts).
+
+    ``raw_scores``: name -> callable(EvalFrames) -> (N,) scores that replace a model's own raw
+    score (the cosine with the goal text) for AUROC and ``f1_best_threshold``; e.g. the base
+    reward of :mod:`zsrm.rewards.base` in its own mode.
+    """
+    raw_scores = raw_scores or {}
+    out: dict[str, dict] = {name: {} for name in models}
+    for task, frames in frames_by_task.items():
+        truth = frames.success
+        for name, reward in models.items():
+            s = score_frames(reward, frames)
+            raw = raw_scores[name](frames) if name in raw_scores else s["raw"]
+            m = reward_metrics(s["binary"], raw, s["margin"], truth)
+            m.update(frames=int(len(frames)), positives=int(truth.sum()),
+                     f1_scripted=binary_metrics(s["binary"][frames.source == "scripted"] > 0.5,
+                                                truth[frames.source == "scripted"])["f1"],
+                     false_positive_rate_random=float((s["binary"][(frames.source == "random") & ~truth] > 0.5).mean())
+                     if ((frames.source == "random") & ~truth).any() else float("nan"))
+            out[name][task] = {k: (round(v, 4) if isinstance(v, float) else v) for k, v in m.items()}
+    return out
+
+
+def write_curves(task: str, models: dict, folder, steps: int = 80, seed: int = 0, image_size: int = 64) -> tuple:
+    """Reward along a scripted trajectory of ``task`` (the paper's Figure 5) for every model:
+    ``FOLDER/<task>.csv`` and ``FOLDER/<task>.png``."""
+    from pathlib import Path
+
+    from zsrm.rewards.curve import plot_curve, record_trajectory, reward_curve, write_csv
+
+    entry = _entry(task)
+    camera = task_camera(task)
+    traj = record_trajectory(entry.goal, cameras=(camera,), steps=steps, seed=seed, image_size=image_size)
+    rows = reward_curve(traj, models)
+    folder = Path(folder)
+    csv_path = write_csv(rows, folder / f"{task}.csv")
+    png_path = plot_curve(rows, traj, folder / f"{task}.png", camera=camera,
+                          title=f"{task}: {entry.goal!r} ({camera} camera, scripted, seed {seed}); "
+                                "green: the oracle says the goal holds")
+    return csv_path, png_path, rows

@@ -1,0 +1,88 @@
+"""Negative goal texts for the binarised reward (paper 2.2, "Full Reward Model Training and Usage").
+
+The reward is 1 when the goal text scores higher than every negative text, else 0, so no
+threshold has to be tuned. Negatives come from the task itself:
+
+* the other relations over the same objects, in the same order ("a yellow block on the left
+  of a red block" for "a yellow block on top of a red block"); relations of another arity
+  are formed where the task names enough objects (see :func:`negative_tasks`);
+* the same relation with the object order swapped ("a red block on top of a yellow block"),
+  except for symmetric relations, whose swapped text says the same thing.
+
+Texts that say the same as the goal are never negatives: ``below(a, b)`` is
+``on_top_of(b, a)``, so only *other* relations in the *same* order are used, never another
+relation in the swapped order.
+
+>>> [t.text for t in negative_tasks(Task("on_top_of", ("yellow", "red")))][:3]
+['a yellow block on the left of a red block', 'a yellow block on the right of a red block', 'a yellow block below a red block']
+>>> negative_texts("a blue puck close to a yellow puck")[-1]  # close to is symmetric: no swap
+'a blue puck inside of a yellow puck'
+"""
+from __future__ import annotations
+
+from zsrm.tasks.language import GoalError, Task, parse_goal
+from zsrm.tasks.relations import RELATIONS
+
+# Relations whose predicate does not change when the two objects swap (Table 1: both read a
+# centre distance). Checked against the predicates themselves in the tests.
+SYMMETRIC = frozenset({"close_to", "inside_of"})
+
+# Relations the goal implies on its own camera, which would tie with it whenever it holds:
+# "a between b and c" means a is right of one and left of the other; "inside of" is "close
+# to" with a smaller distance (Table 1).
+IMPLIED_BY = {"in_between": frozenset({"left_of", "right_of"}), "inside_of": frozenset({"close_to"})}
+
+
+def as_task(goal: str | Task) -> Task:
+    """A Task from a Task or a goal sentence (GoalError if it is not a spatial goal)."""
+    if isinstance(goal, Task):
+        return goal
+    if not isinstance(goal, str):
+        raise GoalError(f"a goal must be a sentence or a Task, got {type(goal).__name__}")
+    return parse_goal(goal)
+
+
+def swapped_tasks(task: Task) -> list[Task]:
+    """The goal's relation over the same objects in the orders that mean something else."""
+    if task.relation in SYMMETRIC:
+        return []
+    a, *rest = task.objects
+    if len(rest) == 1:
+        return [Task(task.relation, (rest[0], a), task.shape)]
+    # in between: put each other object in the middle; (a, c, b) means the same as (a, b, c).
+    b, c = rest
+    return [Task(task.relation, (b, a, c), task.shape), Task(task.relation, (c, a, b), task.shape)]
+
+
+def negative_tasks(task: str | Task) -> list[Task]:
+    """The negatives of a task: other relations over the same objects, then the swapped order.
+
+    For a two-object task every other two-object relation is used; in between is left out, as
+    it needs a third object the task does not name. For the three-object in between, the
+    two-object relations relate the first object to each of the other two. Relations the goal
+    implies (:data:`IMPLIED_BY`) are left out.
+    """
+    task = as_task(task)
+    out: list[Task] = []
+    first, others = task.objects[0], task.objects[1:]
+    for name, rel in RELATIONS.items():
+        if name == task.relation or name in IMPLIED_BY.get(task.relation, ()):
+            continue
+        if rel.arity == len(task.objects):
+            out.append(Task(name, task.objects, task.shape))
+        elif rel.arity == 2 and len(task.objects) > 2:
+            out += [Task(name, (first, other), task.shape) for other in others]
+        # rel.arity > len(task.objects): the task names too few objects to form it.
+    out += swapped_tasks(task)
+    return out
+
+
+def negative_texts(task: str | Task) -> list[str]:
+    """Canonical texts of :func:`negative_tasks`."""
+    return [t.text for t in negative_tasks(task)]
+
+
+def candidate_texts(task: str | Task) -> list[str]:
+    """The goal's canonical text first, then its negatives: what the binarised reward ranks."""
+    task = as_task(task)
+    return [task.text] + negative_texts(task)

@@ -1,0 +1,339 @@
+"""``zsrm finetune``: train the full reward model on the labelled pairs, CLIP-style (paper 2.2).
+
+Two models train with the same loop:
+
+* the fine-tuned VLM (default): starts from a VLM (``scene``, ``open_clip:RN50``, a folder)
+  and trains both towers;
+* the student (``student=True``): a small CNN from scratch whose text side is the VLM's
+  frozen text embedding through an MLP (:mod:`zsrm.reward_model.student`).
+
+The loss is the multi-positive contrastive loss of :mod:`zsrm.vlm.losses` (identical captions
+in a batch are positives of each other, not negatives) plus, with weight
+``hard_negative_weight``, the loss of the reward's own decision: each image's caption against
+its task's negative texts (:mod:`zsrm.reward_model.negatives`), leaving out negatives that the
+labeler also found true for that image.
+
+Resumable: the weights, optimizer and step are checkpointed in ``WORKDIR/checkpoint``; running
+the same command again continues where a killed run stopped. Each step's batch is a function
+of (seed, step) only, so a resumed run draws the same batches as an uninterrupted one.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+from zsrm.reward_model.negatives import candidate_texts
+from zsrm.reward_model.pairs import CaptionedImages, caption_relation
+from zsrm.vlm.base import VisionLanguageModel
+from zsrm.vlm.losses import multi_positive_contrastive_loss
+
+STUDENT_PRESETS = {
+    "default": {},
+    "tiny": {"widths": (8, 8, 16, 16), "embed_dim": 16, "text_hidden": 32},
+}
+
+
+@dataclass
+class FinetuneConfig:
+    data: str = "data/explore"  # a folder written by zsrm collect + zsrm label
+    labels: str = "labels"  # the labels folder inside it (Grad-CAM captions are read, nothing else)
+    out: str = "runs/zsrm/vlm"  # where the trained model is saved
+    workdir: str = ""  # checkpoint and log; default OUT.work
+    vlm: str = "scene"  # the VLM to start from (or, for the student, whose text tower it uses)
+    student: bool = False
+    student_arch: str = "default"  # a key of STUDENT_PRESETS
+    steps: int = 1500
+    batch_size: int = 128
+    lr: float = 0.0  # 0: 3e-4 to fine-tune a VLM, 1e-3 for a student from scratch
+    weight_decay: float = 0.05
+    warmup_steps: int = 100
+    hard_negative_weight: float = 1.0
+    balance: float = 1.0  # 1: each relation drawn equally often; 0: pairs drawn uniformly
+    shift: int = 2  # random translation of the images by up to this many pixels
+    val_fraction: float = 0.1
+    seed: int = 0
+    checkpoint_every: int = 100
+    eval_every: int = 500
+    val_pairs: int = 2000  # validation pairs scored at each evaluation
+    threads: int = 0  # torch threads; 0 keeps torch's default
+
+    # Settings that define the run: a checkpoint made with others cannot be resumed.
+    IDENTITY = ("data", "labels", "vlm", "student", "student_arch", "steps", "batch_size", "lr", "weight_decay",
+                "warmup_steps", "hard_negative_weight", "balance", "shift", "val_fraction", "seed")
+
+    def __post_init__(self):
+        for name in ("steps", "batch_size", "checkpoint_every", "eval_every", "val_pairs"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.batch_size < 2:
+            raise ValueError("batch_size must be >= 2: a contrastive batch needs negatives")
+        if self.student and self.student_arch not in STUDENT_PRESETS:
+            raise ValueError(f"unknown student architecture {self.student_arch!r}; known: {', '.join(STUDENT_PRESETS)}")
+        if self.lr < 0 or self.weight_decay < 0 or self.hard_negative_weight < 0 or self.shift < 0:
+            raise ValueError("lr, weight_decay, hard_negative_weight and shift must be >= 0")
+        if not self.lr:
+            self.lr = 1e-3 if self.student else 3e-4
+        if not self.workdir:
+            self.workdir = str(Path(self.out).with_name(Path(self.out).name + ".work"))
+
+    def identity(self) -> dict:
+        return {k: getattr(self, k) for k in self.IDENTITY}
+
+
+# --- model -------------------------------------------------------------------------------------
+def initial_model(cfg: FinetuneConfig) -> VisionLanguageModel:
+    """The model before training: the VLM itself, or a fresh student on the VLM's text tower."""
+    from zsrm.reward_model.student import StudentConfig, StudentRewardNet, load_reward_backbone
+
+    torch.manual_seed(cfg.seed)
+    vlm = load_reward_backbone(cfg.vlm)
+    if not cfg.student:
+        return vlm
+    return StudentRewardNet(StudentConfig(**STUDENT_PRESETS[cfg.student_arch]), vlm, cfg.vlm)
+
+
+def _optimizer(model: nn.Module, cfg: FinetuneConfig) -> torch.optim.Optimizer:
+    params = [p for p in model.parameters() if p.requires_grad]
+    decay = [p for p in params if p.ndim >= 2]
+    no_decay = [p for p in params if p.ndim < 2]
+    return torch.optim.AdamW([{"params": decay, "weight_decay": cfg.weight_decay},
+                              {"params": no_decay, "weight_decay": 0.0}], lr=cfg.lr)
+
+
+def learning_rate(step: int, cfg: FinetuneConfig) -> float:
+    """Linear warmup, then cosine decay to zero."""
+    if step < cfg.warmup_steps:
+        return cfg.lr * (step + 1) / cfg.warmup_steps
+    progress = (step - cfg.warmup_steps) / max(1, cfg.steps - cfg.warmup_steps)
+    return 0.5 * cfg.lr * (1 + math.cos(math.pi * min(1.0, progress)))
+
+
+# --- loss --------------------------------------------------------------------------------------
+def shift_images(images: np.ndarray, shift: int, rng: np.random.Generator) -> np.ndarray:
+    """Translate each image by up to ``shift`` pixels (edges repeated). Relations between objects
+    do not change under a small common translation; no flips, as they would swap left and right."""
+    if shift <= 0:
+        return images
+    n, h, w, _ = images.shape
+    padded = np.pad(images, ((0, 0), (shift, shift), (shift, shift), (0, 0)), mode="edge")
+    dy, dx = rng.integers(0, 2 * shift + 1, (2, n))
+    return np.stack([padded[i, dy[i]:dy[i] + h, dx[i]:dx[i] + w] for i in range(n)])
+
+
+def reward_logits(image_emb: torch.Tensor, text_emb: torch.Tensor, captions: Sequence[str],
+                  vocab_index: dict[str, int], holds: Sequence[set[str]] | None = None,
+                  scale: torch.Tensor | float = 1.0):
+    """Scaled similarities of each image to its caption and the caption's negatives, the rest
+    of the vocabulary masked to -inf. Returns (logits (B, U), the caption's column (B,)).
+
+    A negative that is also one of the image's own captions (``holds``) is masked: it is true
+    there, not a negative.
+    """
+    allowed = torch.zeros(len(captions), text_emb.shape[0], dtype=torch.bool, device=image_emb.device)
+    target = torch.empty(len(captions), dtype=torch.long, device=image_emb.device)
+    for i, cap in enumerate(captions):
+        true_here = holds[i] if holds is not None else set()
+        allowed[i, [vocab_index[t] for t in candidate_texts(cap) if t == cap or t not in true_here]] = True
+        target[i] = vocab_index[cap]
+    # Mask after scaling: -inf times a learnable scale would give NaN gradients.
+    logits = (scale * (image_emb @ text_emb.T)).masked_fill(~allowed, float("-inf"))
+    return logits, target
+
+
+def batch_loss(model: VisionLanguageModel, images: np.ndarray, captions: list[str],
+               holds: Sequence[set[str]] | None, hard_negative_weight: float) -> tuple[torch.Tensor, dict]:
+    """Contrastive loss of one batch of pairs; returns (loss, its parts as floats)."""
+    image_emb = model.encode_images(images, normalize=True)
+    needed = dict.fromkeys(captions)
+    if hard_negative_weight > 0:
+        for cap in list(needed):
+            needed.update(dict.fromkeys(candidate_texts(cap)))
+    vocab = list(needed)
+    index = {t: i for i, t in enumerate(vocab)}
+    text_emb = model.encode_texts(vocab, normalize=True)
+    scale = model.logit_scale.exp().clamp(max=100.0)
+    clip = multi_positive_contrastive_loss(image_emb, text_emb[[index[c] for c in captions]], captions, scale)
+    parts = {"clip": clip.item()}
+    loss = clip
+    if hard_negative_weight > 0:
+        logits, target = reward_logits(image_emb, text_emb, captions, index, holds, scale)
+        hard = nn.functional.cross_entropy(logits, target)
+        parts["hard"] = hard.item()
+        loss = loss + hard_negative_weight * hard
+    return loss, parts
+
+
+@torch.no_grad()
+def evaluate_pairs(model: VisionLanguageModel, data: CaptionedImages, max_pairs: int = 2000,
+                   batch_size: int = 128, seed: int = 0) -> dict:
+    """On (up to ``max_pairs``) pairs: the contrastive loss, and how often each caption beats
+    its negatives (the binarised reward's rule) against the labels, overall and per relation."""
+    if data.n_pairs == 0:
+        return {}
+    was_training = model.training
+    model.eval()
+    rng = np.random.default_rng([seed, 3])
+    idx = np.sort(rng.choice(data.n_pairs, min(max_pairs, data.n_pairs), replace=False))
+    loss_sum, loss_n, correct, relations = 0.0, 0, [], []
+    for start in range(0, len(idx), batch_size):
+        part = idx[start:start + batch_size]
+        images, captions = data.pair_images(part), data.pair_texts(part)
+        holds = [data.holds(i) for i in part]
+        if len(part) > 1:
+            loss, _ = batch_loss(model, images, captions, None, 0.0)
+            loss_sum, loss_n = loss_sum + float(loss) * len(part), loss_n + len(part)
+        image_emb = model.encode_images(images, normalize=True)
+        vocab = list(dict.fromkeys(t for c in captions for t in candidate_texts(c)))
+        index = {t: i for i, t in enumerate(vocab)}
+        logits, target = reward_logits(image_emb, model.encode_texts(vocab, normalize=True), captions, index, holds)
+        correct += (logits.argmax(dim=1) == target).tolist()
+        relations += [caption_relation(c) for c in captions]
+    model.train(was_training)
+    correct_a, relations_a = np.array(correct), np.array(relations)
+    return {
+        "pairs": int(len(idx)),
+        "loss": loss_sum / loss_n if loss_n else float("nan"),
+        "argmax_accuracy": float(correct_a.mean()),
+        "argmax_accuracy_by_relation": {r: float(correct_a[relations_a == r].mean())
+                                        for r in sorted(set(relations))},
+    }
+
+
+# --- checkpoints -------------------------------------------------------------------------------
+def _save_checkpoint(folder: Path, model: nn.Module, opt: torch.optim.Optimizer, step: int, cfg: FinetuneConfig,
+                     log: list[dict]):
+    from safetensors.torch import save_model
+
+    tmp = folder.with_name(folder.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    save_model(model, str(tmp / "weights.safetensors"))
+    torch.save(opt.state_dict(), tmp / "optimizer.pt")  # tensors and numbers only: loads with weights_only=True
+    (tmp / "state.json").write_text(json.dumps({"step": step, "config": cfg.identity(), "log": log}) + "\n")
+    old = folder.with_name(folder.name + ".old")
+    if folder.exists():
+        folder.rename(old)
+    tmp.rename(folder)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _load_checkpoint(folder: Path, model: nn.Module, opt: torch.optim.Optimizer, cfg: FinetuneConfig):
+    from safetensors.torch import load_model
+
+    state = json.loads((folder / "state.json").read_text())
+    if state["config"] != cfg.identity():
+        diff = {k: (state["config"].get(k), v) for k, v in cfg.identity().items() if state["config"].get(k) != v}
+        raise ValueError(f"the checkpoint in {folder} was made with other settings "
+                         f"({'; '.join(f'{k}: {a} there, {b} now' for k, (a, b) in diff.items())}); "
+                         "pass --fresh to start over or use another --workdir")
+    load_model(model, str(folder / "weights.safetensors"), strict=True)
+    opt.load_state_dict(torch.load(folder / "optimizer.pt", weights_only=True))
+    return state["step"], state["log"]
+
+
+# --- training ----------------------------------------------------------------------------------
+def finetune(cfg: FinetuneConfig, data: CaptionedImages | None = None, model: VisionLanguageModel | None = None,
+             fresh: bool = False, progress: bool = True) -> VisionLanguageModel:
+    """Train (or resume training) the reward model of ``cfg`` and save it to ``cfg.out``.
+
+    ``data``: in-memory pairs (default: read ``cfg.data``); ``model``: the initial model
+    (default: :func:`initial_model`). A resumed run must be given the same initial model, as
+    the checkpoint holds its trained weights, not how to build it.
+    """
+    from tqdm import tqdm
+
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    work, out = Path(cfg.workdir), Path(cfg.out)
+    ckpt = work / "checkpoint"
+    if fresh:
+        shutil.rmtree(work, ignore_errors=True)
+    if data is None:
+        data = CaptionedImages.from_dataset(cfg.data, cfg.labels)
+    train, val = data.split(cfg.val_fraction, cfg.seed)
+    if train.n_pairs == 0:
+        raise ValueError("no training pairs: the labels hold no caption for the cameras of the data")
+    weights = train.sampling_weights(cfg.balance)
+    model = model if model is not None else initial_model(cfg)
+    model.train()
+    opt = _optimizer(model, cfg)
+    start, log = 0, []
+    if (ckpt / "state.json").exists():
+        start, log = _load_checkpoint(ckpt, model, opt, cfg)
+        if progress:
+            print(f"resuming from {ckpt} at step {start}/{cfg.steps}")
+    work.mkdir(parents=True, exist_ok=True)
+
+    elapsed_before = log[-1]["seconds"] if log else 0.0
+    t0 = time.time()
+    bar = tqdm(total=cfg.steps, initial=start, desc="train student" if cfg.student else "fine-tune VLM",
+               unit="step", disable=not progress)
+    for step in range(start, cfg.steps):
+        for group in opt.param_groups:
+            group["lr"] = learning_rate(step, cfg)
+        rng = np.random.default_rng([cfg.seed, 11, step])
+        idx = rng.choice(train.n_pairs, cfg.batch_size, p=weights)
+        images = shift_images(train.pair_images(idx), cfg.shift, rng)
+        captions = train.pair_texts(idx)
+        loss, parts = batch_loss(model, images, captions, [train.holds(i) for i in idx], cfg.hard_negative_weight)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        bar.update(1)
+        bar.set_postfix(loss=f"{loss.item():.3f}", temp=f"{model.logit_scale.exp().item():.1f}")
+        entry = None
+        if (step + 1) % 25 == 0 or step + 1 == cfg.steps:
+            entry = {"step": step + 1, "loss": round(loss.item(), 5), **{k: round(v, 5) for k, v in parts.items()},
+                     "seconds": round(elapsed_before + time.time() - t0, 1)}
+        if val.n_pairs and ((step + 1) % cfg.eval_every == 0 or step + 1 == cfg.steps):
+            res = evaluate_pairs(model, val, cfg.val_pairs, cfg.batch_size, cfg.seed)
+            entry = entry or {"step": step + 1, "seconds": round(elapsed_before + time.time() - t0, 1)}
+            entry.update(val_loss=round(res["loss"], 5), val_argmax_accuracy=round(res["argmax_accuracy"], 4))
+            bar.write(f"step {step + 1}: validation loss {res['loss']:.3f}, "
+                      f"caption beats its negatives on {100 * res['argmax_accuracy']:.1f}% of held-out pairs")
+        if entry:
+            log.append(entry)
+        if (step + 1) % cfg.checkpoint_every == 0 or step + 1 == cfg.steps:
+            _save_checkpoint(ckpt, model, opt, step + 1, cfg, log)
+    bar.close()
+
+    model.eval()
+    final_val = evaluate_pairs(model, val, cfg.val_pairs, cfg.batch_size, cfg.seed) if val.n_pairs else {}
+    summary = {
+        "trained_by": "zsrm finetune" + (" --student" if cfg.student else ""),
+        "config": cfg.identity(),
+        "train_images": len(train), "train_pairs": train.n_pairs,
+        "val_images": len(val), "val_pairs": val.n_pairs,
+        "train_relation_counts": train.relation_counts(),
+        "validation": final_val,
+        "train_seconds": log[-1]["seconds"] if log else None,
+    }
+    if isinstance(getattr(model, "meta", None), dict):
+        model.meta = {**model.meta, "zsrm_finetune": summary}
+    model.save(out)
+    (out / "training.json").write_text(json.dumps(summary, indent=1) + "\n")
+    keys = list(dict.fromkeys(k for row in log for k in row))
+    with open(work / "log.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=keys)
+        writer.writeheader()
+        writer.writerows(log)
+    return model
+
+
+def config_from_args(args) -> FinetuneConfig:
+    fields = FinetuneConfig.__dataclass_fields__
+    return FinetuneConfig(**{k: getattr(args, k) for k in fields if getattr(args, k, None) is not None})
+
+
+__all__ = ["FinetuneConfig", "finetune", "batch_loss", "evaluate_pairs", "initial_model", "learning_rate",
+           "shift_images", "STUDENT_PRESETS"]
