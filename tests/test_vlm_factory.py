@@ -1,0 +1,63 @@
+"""load_vlm specs (zsrm/vlm/factory.py) and the torchvision import guard (zsrm/vlm/compat.py)."""
+import json
+
+import pytest
+
+import zsrm.vlm.factory as factory
+from zsrm.cli import main
+from zsrm.vlm import SceneVLM, create_scene_vlm, load_vlm
+
+
+def test_shipped_scene_model_missing_says_how_to_build_it(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(factory, "SHIPPED_SCENE_DIR", tmp_path / "nowhere")
+    with pytest.raises(FileNotFoundError, match="zsrm pretrain-vlm"):
+        load_vlm("scene")
+    assert main(["eval-vlm", "--vlm", "scene", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "zsrm pretrain-vlm" in err[0]
+
+
+def test_saved_folders_load_by_path(tmp_path):
+    create_scene_vlm("tiny", seed=0).save(tmp_path / "m")
+    assert isinstance(load_vlm(str(tmp_path / "m")), SceneVLM)
+    assert isinstance(load_vlm(tmp_path / "m"), SceneVLM)
+
+
+@pytest.mark.parametrize("spec, error, message", [
+    ("", ValueError, "give a VLM spec"),
+    ("clip", ValueError, "unknown VLM spec 'clip'"),
+    ("runs/missing-folder", ValueError, "does not exist"),
+])
+def test_bad_specs(spec, error, message):
+    with pytest.raises(error, match=message):
+        load_vlm(spec)
+
+
+def test_broken_folders(tmp_path):
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(FileNotFoundError, match="no config.json"):
+        load_vlm(str(tmp_path / "empty"))
+    (tmp_path / "odd").mkdir()
+    (tmp_path / "odd" / "config.json").write_text(json.dumps({"backend": "blip"}))
+    with pytest.raises(ValueError, match="unknown backend 'blip'"):
+        load_vlm(str(tmp_path / "odd"))
+    (tmp_path / "noweights").mkdir()
+    create_scene_vlm("tiny").save(tmp_path / "noweights")
+    (tmp_path / "noweights" / "model.safetensors").unlink()
+    with pytest.raises(FileNotFoundError, match="no model.safetensors"):
+        load_vlm(str(tmp_path / "noweights"))
+
+
+def test_shipped_scene_model_loads_when_present():
+    if not (factory.SHIPPED_SCENE_DIR / "model.safetensors").exists():
+        pytest.fail("the shipped scene VLM is missing: run `zsrm pretrain-vlm`")
+    vlm = load_vlm("scene")
+    assert vlm.config.image_size == 64 and vlm.gradcam_layer == "visual.final"
+    assert vlm.meta["trained_by"] == "zsrm pretrain-vlm"
+
+
+def test_torchvision_imports_on_this_machine():
+    from zsrm.vlm.compat import import_torchvision
+
+    tv = import_torchvision()
+    assert tv.models.resnet18(weights=None).fc.in_features == 512
