@@ -34,7 +34,8 @@ def test_scripted_eval_writes_json(tmp_path):
 def test_demo_writes_a_report(tmp_path):
     out = tmp_path / "report"
     assert main(["demo", "--out", str(out), "--episodes", "1"]) == 0
-    for name in ("README.md", "scenes.png", "policies.csv", "policies.png", "random_episode_tabletop.gif"):
+    for name in ("README.md", "scenes.png", "policies.csv", "policies.png", "random_episode_tabletop.gif",
+                 "base_reward_yellow_puck_blue.csv", "base_reward_yellow_block_red.png"):
         assert (out / name).exists(), name
     rows = json.loads((out / "policies.json").read_text())
     assert {r["policy"] for r in rows} == {"random", "scripted"}

@@ -1,7 +1,8 @@
 """``zsrm demo``: the offline main job. Writes a report folder with tables and plots.
 
-Today it shows the scenes, a random-policy episode per scene, and how often the goal holds
-under a random policy and under the true-state scripted controller (the oracle's view).
+It shows the scenes, a random-policy episode per scene, how often the goal holds under a
+random policy and under the true-state scripted controller (the oracle's view), and the base
+reward of the shipped offline ``scene`` VLM along scripted trajectories (the paper's Figure 5).
 """
 from __future__ import annotations
 
@@ -112,9 +113,32 @@ def plot_policy_table(rows: list[dict], path: Path) -> Path:
     return path
 
 
+REWARD_CURVES = {  # goal -> the camera its relation is read from
+    "a yellow puck close to a blue puck": "tilted",
+    "a yellow block on top of a red block": "front",
+}
+
+
+def write_reward_curves(out: Path, vlm_spec: str = "scene") -> list[Path]:
+    """Base reward (paper 2.1) along scripted trajectories: CSV + PNG per goal."""
+    from zsrm.rewards import BaseReward, OracleReward
+    from zsrm.rewards.curve import plot_curve, record_trajectory, reward_curve, write_csv
+    from zsrm.vlm import load_vlm
+
+    vlm = load_vlm(vlm_spec)
+    paths = []
+    for goal, camera in REWARD_CURVES.items():
+        traj = record_trajectory(goal, cameras=(camera,), steps=40, seed=0)
+        rows = reward_curve(traj, {"base": BaseReward(vlm, camera=camera), "oracle": OracleReward()})
+        stem = out / ("base_reward_" + "_".join(goal.split()[1:3] + goal.split()[-2:-1]))
+        title = f"base reward ({vlm_spec} VLM) for {goal!r}, {camera} camera; green: oracle says the goal holds"
+        paths += [write_csv(rows, stem.with_suffix(".csv")), plot_curve(rows, traj, stem.with_suffix(".png"), camera, title)]
+    return paths
+
+
 def run_demo(out: Path, episodes: int = 5) -> Path:
     out.mkdir(parents=True, exist_ok=True)
-    files = [write_scenes(out), *write_random_gifs(out)]
+    files = [write_scenes(out), *write_random_gifs(out), *write_reward_curves(out)]
     rows = policy_table(episodes)
     with open(out / "policies.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
