@@ -1,0 +1,182 @@
+"""Random exploration data (paper 2.2): random initial arm and object positions, random actions,
+every camera, seeded, written in shards with a manifest and resumable after a kill.
+
+Each image comes with what only evaluation may read: the objects' true world positions and
+their true pixel coordinates on each camera.
+
+>>> import tempfile
+>>> folder = tempfile.mkdtemp()
+>>> data = collect(CollectConfig(images=4, shard_size=2, episode_steps=4, record_every=2), folder, progress=False)
+>>> len(data), data.load(["images_front"])["images_front"].shape
+(4, (4, 64, 64, 3))
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from zsrm.data.dataset import ExplorationData
+from zsrm.data.shards import ShardFolder, save_npz
+from zsrm.tasks.catalogue import PUSHING_ID, TABLETOP_ID
+from zsrm.tasks.language import COLOURS
+from zsrm.tasks.relations import CAMERAS
+
+SCENES = {"tabletop": TABLETOP_ID, "pushing": PUSHING_ID}
+SHAPE_OF = {"tabletop": "block", "pushing": "puck"}
+
+
+@dataclass
+class CollectConfig:
+    """Options of ``zsrm collect``. The data depend on these and nothing else."""
+
+    images: int = 1000  # images (per camera) in all
+    shard_size: int = 100
+    seed: int = 0
+    scenes: tuple[str, ...] = ("tabletop",)
+    cameras: tuple[str, ...] = CAMERAS
+    image_size: int = 64
+    min_objects: int = 2
+    max_objects: int = 4
+    exclude: tuple[str, ...] = ()  # colours never to place (the multi-task data never sees blue)
+    episode_steps: int = 20  # random actions per episode
+    record_every: int = 5  # keep the images of every this many steps, from the reset on
+    colours: tuple[str, ...] = field(init=False)
+
+    def __post_init__(self):
+        for name in ("images", "shard_size", "image_size", "episode_steps", "record_every"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        self.scenes, self.cameras, self.exclude = tuple(self.scenes), tuple(self.cameras), tuple(self.exclude)
+        for s in self.scenes:
+            if s not in SCENES:
+                raise ValueError(f"unknown scene {s!r}; known scenes: {', '.join(SCENES)}")
+        if not self.scenes:
+            raise ValueError("give at least one scene")
+        for c in self.cameras:
+            if c not in CAMERAS:
+                raise ValueError(f"unknown camera {c!r}; known cameras: {', '.join(CAMERAS)}")
+        for c in self.exclude:
+            if c not in COLOURS:
+                raise ValueError(f"unknown colour {c!r} to exclude; known colours: {', '.join(COLOURS)}")
+        self.colours = tuple(c for c in COLOURS if c not in self.exclude)
+        if not 1 <= self.min_objects <= self.max_objects <= len(self.colours):
+            raise ValueError(f"need 1 <= min_objects <= max_objects <= {len(self.colours)} "
+                             f"(colours left: {', '.join(self.colours)}), got {self.min_objects}..{self.max_objects}")
+
+    @property
+    def n_shards(self) -> int:
+        return -(-self.images // self.shard_size)
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d.pop("colours")
+        return d
+
+
+class _Envs:
+    """One env per (scene, colour set), made on first use (the colour set fixes the model)."""
+
+    def __init__(self, cfg: CollectConfig):
+        self.cfg, self.envs = cfg, {}
+
+    def get(self, scene: str, colours: tuple[str, ...]):
+        key = (scene, colours)
+        if key not in self.envs:
+            import gymnasium as gym
+
+            import zsrm.envs  # noqa: F401  (registers the ids)
+
+            self.envs[key] = gym.make(SCENES[scene], task=None, objects=colours, cameras=self.cfg.cameras,
+                                      image_size=self.cfg.image_size).unwrapped
+        return self.envs[key]
+
+    def close(self):
+        for env in self.envs.values():
+            env.close()
+        self.envs.clear()
+
+
+def block_widths(cfg: CollectConfig) -> dict[str, dict[str, float]]:
+    """Width of one object in pixels, per scene and camera (the labeler's pixel scale)."""
+    from zsrm.envs.cameras import object_width_px
+
+    envs = _Envs(cfg)
+    try:
+        return {s: {c: object_width_px(envs.get(s, cfg.colours[:2]), c, cfg.image_size) for c in cfg.cameras}
+                for s in cfg.scenes}
+    finally:
+        envs.close()
+
+
+def collect_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> dict[str, np.ndarray]:
+    """The arrays of shard ``index``: a function of ``cfg`` and ``index`` only."""
+    from zsrm.envs.cameras import project
+
+    own = envs is None
+    envs = envs or _Envs(cfg)
+    rng = np.random.default_rng([cfg.seed, index])
+    n = min(cfg.shard_size, cfg.images - index * cfg.shard_size)
+    k = len(COLOURS)
+    out = {f"images_{c}": np.zeros((n, cfg.image_size, cfg.image_size, 3), np.uint8) for c in cfg.cameras}
+    out.update({f"pixels_{c}": np.full((n, k, 2), np.nan, np.float32) for c in cfg.cameras})
+    out.update(positions=np.full((n, k, 3), np.nan, np.float32), present=np.zeros((n, k), bool),
+               scene=np.zeros(n, np.int8), episode=np.zeros(n, np.int32), step=np.zeros(n, np.int16))
+    row, episode = 0, 0
+    try:
+        while row < n:
+            scene = cfg.scenes[rng.integers(len(cfg.scenes))]
+            n_obj = int(rng.integers(cfg.min_objects, cfg.max_objects + 1))
+            chosen = set(rng.choice(cfg.colours, n_obj, replace=False).tolist())
+            colours = tuple(c for c in COLOURS if c in chosen)
+            env = envs.get(scene, colours)
+            obs, info = env.reset(seed=int(rng.integers(2**31 - 1)))
+            for step in range(cfg.episode_steps):
+                if step % cfg.record_every == 0 and row < n:
+                    for cam in cfg.cameras:
+                        out[f"images_{cam}"][row] = obs[cam]
+                    for colour, xyz in info["object_positions"].items():
+                        i = COLOURS.index(colour)
+                        out["positions"][row, i] = xyz
+                        out["present"][row, i] = True
+                        for cam in cfg.cameras:
+                            out[f"pixels_{cam}"][row, i] = project(env, cam, xyz, cfg.image_size)
+                    out["scene"][row] = cfg.scenes.index(scene)
+                    out["episode"][row], out["step"][row] = episode, step
+                    row += 1
+                action = rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32)
+                obs, _, terminated, _, info = env.step(action)
+                if terminated:  # an object fell off the table: a new episode
+                    break
+            episode += 1
+    finally:
+        if own:
+            envs.close()
+    return out
+
+
+def collect(cfg: CollectConfig, folder, progress: bool = True) -> ExplorationData:
+    """Collect (or finish collecting) the dataset ``cfg`` describes into ``folder``."""
+    from tqdm import tqdm
+
+    shards = ShardFolder(folder, kind="exploration", config=cfg.to_json(), n_shards=cfg.n_shards,
+                         extra={"colours": list(COLOURS), "block_width_px": block_widths(cfg)})
+    pending = shards.pending()
+    bar = tqdm(total=cfg.images, initial=cfg.images - sum(_shard_len(cfg, i) for i in pending),
+               unit="img", desc="collect", disable=not progress)
+    envs = _Envs(cfg)
+    try:
+        for index in pending:
+            arrays = collect_shard(cfg, index, envs)
+            save_npz(shards.path(index, ".npz"), **arrays)
+            shards.finish(index, {"images": len(arrays["scene"]), "seed": [cfg.seed, index]})
+            bar.update(len(arrays["scene"]))
+    finally:
+        envs.close()
+        bar.close()
+    return ExplorationData(folder)
+
+
+def _shard_len(cfg: CollectConfig, index: int) -> int:
+    return min(cfg.shard_size, cfg.images - index * cfg.shard_size)

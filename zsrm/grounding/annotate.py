@@ -1,0 +1,186 @@
+"""``zsrm label``: caption collected exploration images with Grad-CAM + Table 1 (paper 2.2).
+
+For every shard of a dataset folder, the labels folder (``DATA/labels`` by default) gets:
+
+* ``shard_XXXXX.npz``: per camera, the Grad-CAM heat maps, located pixel coordinates,
+  heat-map peaks and target scores of every colour's phrase;
+* ``shard_XXXXX.json``: ``{"captions": [[...], ...]}``, the Grad-CAM captions of each image:
+  what the reward model trains on. Only images and the scene's object list were read;
+* ``oracle/shard_XXXXX.json``: the captions that the TRUE coordinates give, kept apart for
+  evaluation only: ``"pixel"`` (true pixel coordinates through the same rules and pixel
+  thresholds) and ``"world"`` (the oracle on true world positions).
+
+>>> import tempfile
+>>> from zsrm.data.collect import CollectConfig, collect
+>>> from zsrm.grounding.testing import ColourVLM
+>>> folder = tempfile.mkdtemp()
+>>> data = collect(CollectConfig(images=4, shard_size=4, episode_steps=2, record_every=1), folder, progress=False)
+>>> _ = label_dataset(folder, LabelConfig(vlm="testing"), vlm=ColourVLM(64), progress=False)
+>>> len(data.captions()), len(data.captions(oracle="pixel"))
+(4, 4)
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from zsrm.data.collect import SHAPE_OF
+from zsrm.data.dataset import LABELS, ORACLE, ExplorationData
+from zsrm.data.shards import ShardFolder, save_json, save_npz
+from zsrm.grounding.gradcam import GradCAM
+from zsrm.grounding.labeler import SpatialLabeler, pixel_thresholds, world_table
+from zsrm.tasks.language import COLOURS
+from zsrm.tasks.relations import WORLD_THRESHOLDS, Thresholds
+
+
+@dataclass
+class LabelConfig:
+    """Options of ``zsrm label``. Thresholds are in metres (Table 1's, for 6 cm blocks); each
+    camera's pixel thresholds are these times that camera's pixels per metre."""
+
+    vlm: str = "scene"
+    target: str = "contrast"
+    locate: str = "peak_centroid"
+    cell_centres: str = "receptive_field"
+    template: str = "{}"  # how a phrase is written to the text tower, e.g. "a {}"
+    batch_size: int = 64
+    thresholds: dict = field(default_factory=lambda: asdict(WORLD_THRESHOLDS))
+
+    def world_thresholds(self) -> Thresholds:
+        return Thresholds(**self.thresholds)
+
+
+def phrases_for(scene: str, colours) -> list[str]:
+    return [f"{c} {SHAPE_OF[scene]}" for c in colours]
+
+
+class Grounder:
+    """Grad-CAM coordinates of every colour's phrase on every camera of a dataset's images."""
+
+    def __init__(self, vlm, cfg: LabelConfig, data: ExplorationData, centres: list | None = None):
+        self.cfg, self.data = cfg, data
+        # Colours the data can hold: the contrast of each phrase is against the other ones.
+        self.allowed = [c for c in COLOURS if c not in data.config["exclude"]]
+        self.gradcam = {
+            scene: GradCAM(vlm, target=cfg.target, contrast=phrases_for(scene, self.allowed), locate=cfg.locate,
+                           cell_centres=cfg.cell_centres, presence_threshold=None, batch_size=cfg.batch_size,
+                           template=cfg.template)
+            for scene in data.scenes
+        }
+        size = data.config["image_size"]
+        if centres is None:
+            # Measured once, on the first shard's front images, so that a resumed run uses the
+            # same centres as an uninterrupted one.
+            first = data.shard(data.shards[0], [f"images_{data.cameras[0]}"])[f"images_{data.cameras[0]}"]
+            centres = next(iter(self.gradcam.values())).calibrate(first[:8])
+        self.centres = np.asarray(centres, dtype=np.float64)
+        for g in self.gradcam.values():
+            g.set_centres(self.centres, (size, size))
+
+    def shard(self, arrays: dict) -> dict[str, np.ndarray]:
+        """Per camera: ``gradcam_xy_<cam>`` (n, 4, 2), ``gradcam_score_<cam>``,
+        ``gradcam_peak_<cam>`` (n, 4), ``gradcam_map_<cam>`` (n, 4, h, w) float16; NaN or
+        0 for colours the data never holds."""
+        n, k = len(arrays["scene"]), len(COLOURS)
+        cols = [COLOURS.index(c) for c in self.allowed]
+        out = {}
+        for cam in self.data.cameras:
+            xy = np.full((n, k, 2), np.nan, np.float32)
+            score = np.full((n, k), np.nan, np.float32)
+            peak = np.zeros((n, k), np.float32)
+            maps = None
+            for s, scene in enumerate(self.data.scenes):
+                rows = np.nonzero(arrays["scene"] == s)[0]
+                if not len(rows):
+                    continue
+                res = self.gradcam[scene](arrays[f"images_{cam}"][rows], phrases_for(scene, self.allowed))
+                if maps is None:
+                    maps = np.zeros((n, k) + res.maps.shape[-2:], np.float16)
+                xy[rows[:, None], cols] = res.xy
+                score[rows[:, None], cols] = res.score
+                peak[rows[:, None], cols] = res.peak
+                maps[rows[:, None], cols] = res.maps
+            out.update({f"gradcam_xy_{cam}": xy, f"gradcam_score_{cam}": score, f"gradcam_peak_{cam}": peak,
+                        f"gradcam_map_{cam}": maps})
+        return out
+
+
+def labelers(data: ExplorationData, cfg: LabelConfig) -> dict[str, SpatialLabeler]:
+    """The labeler of each scene: its shape's words, its cameras' pixel thresholds."""
+    return {scene: SpatialLabeler(pixel_thresholds(data.block_width_px[scene], SHAPE_OF[scene],
+                                                   cfg.world_thresholds()), shape=SHAPE_OF[scene])
+            for scene in data.scenes}
+
+
+def captions_from_pixels(data: ExplorationData, cfg: LabelConfig, pixels: dict, present: np.ndarray,
+                         scene_index: np.ndarray) -> list[list[str]]:
+    """Captions of N images from pixel coordinates ``{camera: (N, 4, 2)}`` of the objects."""
+    out: list[list[str]] = [[] for _ in range(len(present))]
+    for s, (scene, labeler) in enumerate(labelers(data, cfg).items()):
+        rows = np.nonzero(scene_index == s)[0]
+        if len(rows):
+            caps = labeler.captions({c: xy[rows] for c, xy in pixels.items()}, present[rows])
+            for r, cap in zip(rows, caps):
+                out[r] = cap
+    return out
+
+
+def world_captions(data: ExplorationData, cfg: LabelConfig, positions, present, scene_index) -> list[list[str]]:
+    """The oracle's captions from true world positions (evaluation only)."""
+    out: list[list[str]] = [[] for _ in range(len(present))]
+    for s, scene in enumerate(data.scenes):
+        rows = np.nonzero(scene_index == s)[0]
+        if len(rows):
+            table = world_table(positions[rows], present[rows], thresholds=cfg.world_thresholds())
+            for r, cap in zip(rows, table.captions(SHAPE_OF[scene])):
+                out[r] = cap
+    return out
+
+
+def label_dataset(data_folder, cfg: LabelConfig, out: str | Path = LABELS, vlm=None, progress: bool = True) -> Path:
+    """Label every finished shard of ``data_folder`` not labelled yet; returns the labels folder.
+    ``vlm``: a loaded model (default: ``load_vlm(cfg.vlm)``)."""
+    from tqdm import tqdm
+
+    data = ExplorationData(data_folder)
+    if not data.shards:
+        raise ValueError(f"{data_folder} holds no finished shard: run zsrm collect first")
+    folder = data.labels_folder(out)
+    if vlm is None:
+        from zsrm.vlm import load_vlm
+
+        vlm = load_vlm(cfg.vlm)
+    shards = ShardFolder(folder, kind="labels", config=asdict(cfg), n_shards=data.manifest["n_shards"],
+                         extra={"data": str(Path(data_folder).resolve())})
+    grounder = Grounder(vlm, cfg, data, shards.manifest.get("centres"))
+    if "centres" not in shards.manifest:
+        shards.manifest["centres"] = grounder.centres.tolist()
+    todo = [i for i in shards.pending() if shard_done(data, i)]
+    bar = tqdm(total=sum(data.manifest["shards"][f"shard_{i:05d}"]["images"] for i in todo), unit="img",
+               desc="label", disable=not progress)
+    try:
+        for index in todo:
+            name = f"shard_{index:05d}"
+            arrays = data.shard(name)
+            grad = grounder.shard({k: v for k, v in arrays.items() if k.startswith("images_") or k == "scene"})
+            # Training captions: from the Grad-CAM coordinates and the scene's object list only.
+            captions = captions_from_pixels(data, cfg, {c: grad[f"gradcam_xy_{c}"] for c in data.cameras},
+                                            arrays["present"], arrays["scene"])
+            # Evaluation only: what the true coordinates say.
+            truth_pixel = captions_from_pixels(data, cfg, {c: arrays[f"pixels_{c}"] for c in data.cameras},
+                                               arrays["present"], arrays["scene"])
+            truth_world = world_captions(data, cfg, arrays["positions"], arrays["present"], arrays["scene"])
+            save_npz(shards.path(index, ".npz"), **grad)
+            save_json(shards.path(index, ".json", sub=ORACLE), {"pixel": truth_pixel, "world": truth_world})
+            save_json(shards.path(index, ".json"), {"captions": captions})
+            shards.finish(index, {"images": len(captions)})
+            bar.update(len(captions))
+    finally:
+        bar.close()
+    return folder
+
+
+def shard_done(data: ExplorationData, index: int) -> bool:
+    return f"shard_{index:05d}" in data.manifest["shards"]

@@ -1,0 +1,300 @@
+"""``zsrm eval-grounding``: how well Grad-CAM finds objects, and how right its captions are.
+
+* localisation: pixel distance from each present object's Grad-CAM coordinates to its true
+  projected centre, per camera (median, 90th percentile, in pixels and block widths), also
+  for the paper's plain argmax of the stored heat maps;
+* captions: precision / recall / F1 per relation of the Grad-CAM captions against the
+  captions that the true pixel coordinates give under the same rules and thresholds (this
+  isolates grounding errors), and against the world oracle (which adds the error of reading
+  3-D relations off 2-D views);
+* presence: how well the Grad-CAM target score tells a phrase for an object in the scene
+  from one for an object that is not (AUROC);
+* Figure 3: an image and the heat maps of "red block" and "yellow block", per camera.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from zsrm.data.collect import SHAPE_OF
+from zsrm.data.dataset import LABELS, ExplorationData
+from zsrm.data.shards import load_npz, read_manifest
+from zsrm.grounding.annotate import LabelConfig, labelers
+from zsrm.grounding.gradcam import grid_centres, locate
+from zsrm.grounding.labeler import RelationTable, world_table
+from zsrm.tasks.language import COLOURS
+from zsrm.tasks.relations import RELATIONS
+
+MIN_SUPPORT = 20  # fewer true positives than this: the F1 is reported but flagged as noisy
+
+
+def load_labels(data: ExplorationData, labels: str | Path = LABELS) -> tuple[dict, dict]:
+    """(labels manifest, concatenated label arrays) for the dataset's finished shards."""
+    folder = data.labels_folder(labels)
+    manifest = read_manifest(folder)
+    missing = [s for s in data.shards if s not in manifest["shards"]]
+    if missing:
+        raise ValueError(f"{folder} has not labelled {len(missing)} shard(s) ({missing[0]}, ...): run zsrm label")
+    parts = [load_npz(folder / f"{s}.npz") for s in data.shards]
+    return manifest, {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def _errors(xy: np.ndarray, truth: np.ndarray, present: np.ndarray) -> np.ndarray:
+    """Distances (N, 4) of located to true pixel coordinates; NaN for absent objects, inf for
+    present objects that were not located."""
+    err = np.linalg.norm(xy.astype(np.float64) - truth, axis=-1)
+    err[present & ~np.isfinite(err)] = np.inf
+    err[~present] = np.nan
+    return err
+
+
+def _summary(err: np.ndarray) -> dict:
+    e = err[np.isfinite(err) | np.isinf(err)]
+    if not len(e):
+        return {"n": 0, "median": None, "p90": None}
+    return {"n": int(len(e)), "median": float(np.median(e)), "p90": float(np.percentile(e, 90))}
+
+
+def _wrong_object(xy: np.ndarray, truth: np.ndarray, present: np.ndarray) -> float:
+    """Share of located objects whose Grad-CAM point is nearer another present object's true
+    centre than its own."""
+    d = np.linalg.norm(xy[:, :, None].astype(np.float64) - truth[:, None], axis=-1)  # (N, K, K)
+    d[~np.broadcast_to(present[:, None, :], d.shape)] = np.inf
+    ok = present & np.isfinite(xy).all(-1)
+    nearest = np.argmin(d, axis=-1)
+    return float((nearest != np.arange(len(COLOURS))[None])[ok].mean()) if ok.any() else float("nan")
+
+
+def auroc(positive: np.ndarray, negative: np.ndarray) -> float | None:
+    """Probability that a random positive scores above a random negative (ties count half)."""
+    positive, negative = positive[np.isfinite(positive)], negative[np.isfinite(negative)]
+    if not len(positive) or not len(negative):
+        return None
+    scores = np.concatenate([positive, negative])
+    order = scores.argsort(kind="mergesort")
+    ranks = np.empty(len(scores))
+    ranks[order] = np.arange(1, len(scores) + 1)
+    for v in np.unique(scores):  # average ranks of ties
+        tie = scores == v
+        ranks[tie] = ranks[tie].mean()
+    u = ranks[: len(positive)].sum() - len(positive) * (len(positive) + 1) / 2
+    return float(u / (len(positive) * len(negative)))
+
+
+def prf(pred: RelationTable, truth: RelationTable) -> dict[str, dict]:
+    """Precision, recall, F1 and support (true positives in ``truth``) per relation, over all
+    (image, ordered object tuple) pairs. Undefined ratios are None."""
+    out = {}
+    for rel in pred.holds:
+        p, t = pred.holds[rel], truth.holds[rel]
+        tp, fp, fn = int((p & t).sum()), int((p & ~t).sum()), int((~p & t).sum())
+        precision = tp / (tp + fp) if tp + fp else None
+        recall = tp / (tp + fn) if tp + fn else None
+        f1 = 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else None
+        out[rel] = {"precision": precision, "recall": recall, "f1": f1, "support": tp + fn, "predicted": tp + fp}
+    return out
+
+
+def _tables(data, cfg, pixels: dict, present, scene_index, world: bool = False, positions=None):
+    """Relation tables over all images (scenes' labelers applied to their own rows)."""
+    holds = {r: np.zeros((len(present), len(_tuples(r))), bool) for r in RELATIONS}
+    for s, (scene, labeler) in enumerate(labelers(data, cfg).items()):
+        rows = np.nonzero(scene_index == s)[0]
+        if not len(rows):
+            continue
+        if world:
+            table = world_table(positions[rows], present[rows], thresholds=cfg.world_thresholds())
+        else:
+            table = labeler.table({c: xy[rows] for c, xy in pixels.items()}, present[rows])
+        for r in RELATIONS:
+            holds[r][rows] = table.holds[r]
+    return RelationTable(COLOURS, {r: _tuples(r) for r in RELATIONS}, holds)
+
+
+def _tuples(relation: str) -> np.ndarray:
+    from zsrm.grounding.labeler import object_tuples
+
+    return object_tuples(RELATIONS[relation].arity, len(COLOURS))
+
+
+def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
+    """The grounding report of a labelled dataset (see the module docstring)."""
+    data = ExplorationData(data_folder)
+    manifest, lab = load_labels(data, labels)
+    cfg = LabelConfig(**manifest["config"])
+    arr = data.load(["positions", "present", "scene"] + [f"pixels_{c}" for c in data.cameras])
+    present, scene_index = arr["present"], arr["scene"]
+    size = data.config["image_size"]
+    scene0 = data.scenes[0]
+    widths = np.array([[data.block_width_px[s][c] for c in data.cameras] for s in data.scenes])[scene_index]
+
+    report: dict = {"median_px_error": {}, "p90_px_error": {}, "block_width_px": {}, "median_block_widths": {},
+                    "median_px_error_argmax": {}, "p90_px_error_argmax": {}, "wrong_object_rate": {},
+                    "not_located_rate": {}, "median_px_error_by_colour": {}, "presence_auroc": {}}
+    for j, cam in enumerate(data.cameras):
+        truth = arr[f"pixels_{cam}"].astype(np.float64)
+        xy = lab[f"gradcam_xy_{cam}"]
+        err = _errors(xy, truth, present)
+        s = _summary(err)
+        report["median_px_error"][cam], report["p90_px_error"][cam] = s["median"], s["p90"]
+        report["block_width_px"][cam] = data.block_width_px[scene0][cam]
+        rel = err / widths[:, j:j + 1]
+        report["median_block_widths"][cam] = _summary(rel)["median"]
+        report["wrong_object_rate"][cam] = _wrong_object(xy, truth, present)
+        report["not_located_rate"][cam] = float(np.isinf(err[present]).mean())
+        report["median_px_error_by_colour"][cam] = {
+            c: _summary(err[:, i])["median"] for i, c in enumerate(COLOURS) if present[:, i].any()}
+        # The paper's state extractor: the argmax cell's geometric centre, from the stored maps.
+        maps = lab[f"gradcam_map_{cam}"].astype(np.float32)
+        plain = locate(maps, grid_centres(maps.shape[-2:], (size, size)), "argmax")
+        s = _summary(_errors(plain, truth, present))
+        report["median_px_error_argmax"][cam], report["p90_px_error_argmax"][cam] = s["median"], s["p90"]
+        score = lab[f"gradcam_score_{cam}"]
+        allowed = np.isfinite(score)
+        report["presence_auroc"][cam] = auroc(score[present & allowed], score[~present & allowed])
+
+    pixels = {c: lab[f"gradcam_xy_{c}"] for c in data.cameras}
+    truth_pixels = {c: arr[f"pixels_{c}"] for c in data.cameras}
+    pred = _tables(data, cfg, pixels, present, scene_index)
+    vs_pixel = prf(pred, _tables(data, cfg, truth_pixels, present, scene_index))
+    vs_world = prf(pred, _tables(data, cfg, None, present, scene_index, world=True, positions=arr["positions"]))
+    truth_pixel_vs_world = prf(_tables(data, cfg, truth_pixels, present, scene_index),
+                               _tables(data, cfg, None, present, scene_index, world=True, positions=arr["positions"]))
+
+    report["f1"] = {r: v["f1"] for r, v in vs_pixel.items()}
+    report["precision"] = {r: v["precision"] for r, v in vs_pixel.items()}
+    report["recall"] = {r: v["recall"] for r, v in vs_pixel.items()}
+    report["support"] = {r: v["support"] for r, v in vs_pixel.items()}
+    report["f1_vs_world"] = {r: v["f1"] for r, v in vs_world.items()}
+    report["support_world"] = {r: v["support"] for r, v in vs_world.items()}
+    report["f1_true_pixels_vs_world"] = {r: v["f1"] for r, v in truth_pixel_vs_world.items()}
+    report["relations"] = {"vs_true_pixels": vs_pixel, "vs_world": vs_world}
+    report["notes"] = _notes(report)
+    report["meta"] = {
+        "images": len(data),
+        "scenes": list(data.scenes),
+        "cameras": list(data.cameras),
+        "image_size": size,
+        "collect": data.config,
+        "label": manifest["config"],
+        "f1_reference": "captions from the TRUE pixel coordinates (projected object centres) through the "
+                        "same Table 1 rules and pixel thresholds; f1_vs_world: against the world oracle "
+                        "(holds_in_world on true 3-D positions), which adds the error of reading relations "
+                        "off one 2-D view (e.g. a farther block looks higher on the front camera)",
+        "px_error": "distance from the Grad-CAM coordinates to the projection of the object's true centre, "
+                    "present objects only; *_argmax: the paper's plain argmax cell centre of the same maps",
+    }
+    return report
+
+
+def _notes(report: dict) -> list[str]:
+    notes = []
+    for rel, f1 in report["f1"].items():
+        need = 0.9 if rel in ("left_of", "right_of") else 0.8
+        support = report["support"][rel]
+        if f1 is None:
+            notes.append(f"{rel}: F1 undefined: no true or predicted instance in this data (support {support})")
+        elif f1 < need:
+            notes.append(f"{rel}: F1 {f1:.2f} is below {need} (support {support})")
+        elif support < MIN_SUPPORT:
+            notes.append(f"{rel}: only {support} true instances: the F1 is noisy")
+    return notes
+
+
+def write_tables(report: dict, csv_prefix: str | Path) -> list[Path]:
+    """The report's per-camera and per-relation numbers as two CSV files."""
+    prefix = Path(csv_prefix)
+    prefix.parent.mkdir(parents=True, exist_ok=True)
+    cams = prefix.with_name(prefix.name + "_cameras.csv")
+    rows = ["camera,median_px_error,p90_px_error,block_width_px,median_block_widths,median_px_error_argmax,"
+            "wrong_object_rate,presence_auroc"]
+    for cam in report["median_px_error"]:
+        rows.append(",".join(_fmt(report[k][cam]) for k in (
+            "median_px_error", "p90_px_error", "block_width_px", "median_block_widths", "median_px_error_argmax",
+            "wrong_object_rate", "presence_auroc")).join([cam + ",", ""]))
+    cams.write_text("\n".join(rows) + "\n")
+    rels = prefix.with_name(prefix.name + "_relations.csv")
+    rows = ["relation,precision,recall,f1,support,f1_vs_world,support_world"]
+    for rel in report["f1"]:
+        rows.append(",".join([rel] + [_fmt(report[k][rel]) for k in (
+            "precision", "recall", "f1", "support", "f1_vs_world", "support_world")]))
+    rels.write_text("\n".join(rows) + "\n")
+    return [cams, rels]
+
+
+def _fmt(v) -> str:
+    return "" if v is None else (f"{v:.4g}" if isinstance(v, float) else str(v))
+
+
+def figure3(data_folder, vlm, out: str | Path, labels: str | Path = LABELS, index: int | None = None,
+            phrases=("red", "yellow")) -> Path:
+    """Figure 3 (d, e) of the paper, per camera: the image, and the Grad-CAM heat maps of
+    "red block" and "yellow block" (white is highest), with the located (+) and true (o) centres."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from zsrm.grounding.annotate import Grounder
+
+    data = ExplorationData(data_folder)
+    manifest = read_manifest(data.labels_folder(labels))
+    cfg = LabelConfig(**manifest["config"])
+    arr = data.load(["present", "scene"])
+    idx = [COLOURS.index(c) for c in phrases]
+    if index is None:
+        candidates = np.nonzero(arr["present"][:, idx].all(1))[0]
+        if not len(candidates):
+            raise ValueError(f"no image holds both {' and '.join(phrases)} objects")
+        index = int(candidates[0])
+    # Load only the chosen image's shard.
+    start = 0
+    for name in data.shards:
+        n = data.manifest["shards"][name]["images"]
+        if index < start + n:
+            break
+        start += n
+    one = {k: v[index - start:index - start + 1] for k, v in data.shard(name).items()}
+    shape = SHAPE_OF[data.scenes[int(one["scene"][0])]]
+    grounder = Grounder(vlm, cfg, data, manifest.get("centres"))
+    grad = grounder.shard({k: v for k, v in one.items() if k.startswith("images_") or k == "scene"})
+    size = data.config["image_size"]
+
+    fig, axes = plt.subplots(len(data.cameras), 3, figsize=(7.5, 2.6 * len(data.cameras)), squeeze=False)
+    marker_colour = {"red": "#ff3030", "yellow": "#ffd21a", "green": "#30c040", "blue": "#3060ff"}
+    for r, cam in enumerate(data.cameras):
+        image = one[f"images_{cam}"][0]
+        axes[r, 0].imshow(image)
+        axes[r, 0].set_ylabel(cam)
+        axes[r, 0].set_title("image" if r == 0 else "")
+        for c, (colour, k) in enumerate(zip(phrases, idx), start=1):
+            heat = grad[f"gradcam_map_{cam}"][0, k].astype(np.float32)
+            ax = axes[r, c]
+            # Cells drawn over the pixels they cover, bilinear like the usual Grad-CAM overlay.
+            ax.imshow(heat, cmap="gray", interpolation="bilinear", extent=(-0.5, size - 0.5, size - 0.5, -0.5),
+                      vmin=0, vmax=max(float(heat.max()), 1e-12))
+            gx, gy = grad[f"gradcam_xy_{cam}"][0, k]
+            tx, ty = one[f"pixels_{cam}"][0, k]
+            ax.plot([gx], [gy], "+", color=marker_colour[colour], ms=12, mew=2)
+            ax.plot([tx], [ty], "o", mfc="none", mec=marker_colour[colour], ms=9, mew=1.5)
+            if r == 0:
+                ax.set_title(f"Grad-CAM '{colour} {shape}'")
+        for ax in axes[r]:
+            ax.set_xticks([])
+            ax.set_yticks([])
+    fig.suptitle(f"Grad-CAM grounding ({cfg.vlm}), image {index}: + located, o true centre", fontsize=9)
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def save_report(report: dict, out: str | Path) -> Path:
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=2) + "\n")
+    return out

@@ -1,0 +1,175 @@
+"""The spatial labeler of Table 1: object coordinates from three cameras -> captions.
+
+The front camera decides left of / right of / on top of / below / in between, the left
+camera in front of / behind, the 45-degree camera close to / inside of (paper 2.2). The
+predicates and the thresholds' meaning come from :mod:`zsrm.tasks.relations`, the module
+the oracle uses, so Grad-CAM captions and true-coordinate captions compare one to one.
+
+Pixel coordinates are ``(x, row)`` with the row pointing down; the labeler flips the row
+(``y = -row``) so that y points up, as Table 1 reads them. Every caption is the canonical
+goal sentence (:attr:`zsrm.tasks.language.Task.text`), so captions match goal texts exactly.
+
+>>> labeler = SpatialLabeler.from_block_widths({"front": 6.0, "left": 6.0, "tilted": 7.0})
+>>> coords = {"front": {"red": (20, 40), "yellow": (44, 40)},
+...           "left": {"red": (31, 40), "yellow": (31, 40)},
+...           "tilted": {"red": (20, 30), "yellow": (44, 30)}}
+>>> labeler(coords)
+['a red block on the left of a yellow block', 'a yellow block on the right of a red block']
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import permutations
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from zsrm.tasks.language import COLOURS, Task
+from zsrm.tasks.relations import CAMERAS, RELATIONS, WORLD_THRESHOLDS, Thresholds, camera_plane
+
+# Object widths (metres) of the scenes' shapes: the world thresholds are in metres.
+OBJECT_WIDTH = {"block": 0.06, "puck": 0.07}
+
+
+def pixel_thresholds(block_width_px: Mapping[str, float], shape: str = "block",
+                     world: Thresholds = WORLD_THRESHOLDS) -> dict[str, Thresholds]:
+    """Per-camera pixel thresholds: the world thresholds scaled by pixels per metre, measured
+    as an object's width in pixels on that camera over its width in metres."""
+    if shape not in OBJECT_WIDTH:
+        raise ValueError(f"unknown shape {shape!r}; known shapes: {', '.join(OBJECT_WIDTH)}")
+    out = {}
+    for camera, width in block_width_px.items():
+        if not width > 0:
+            raise ValueError(f"block width on camera {camera!r} must be positive, got {width}")
+        out[camera] = world.scaled(width / OBJECT_WIDTH[shape])
+    return out
+
+
+def object_tuples(arity: int, k: int) -> np.ndarray:
+    """All ordered tuples of ``arity`` different object indices out of ``k``: (T, arity)."""
+    tuples = list(permutations(range(k), arity))
+    return np.array(tuples, dtype=np.int64).reshape(len(tuples), arity)
+
+
+def pixel_planes(pixels: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Pixel coordinates (x, row) -> Table 1's plane (x right, y up): flip the row."""
+    out = {}
+    for camera, xy in pixels.items():
+        xy = np.asarray(xy, dtype=np.float64)
+        out[camera] = np.stack([xy[..., 0], -xy[..., 1]], axis=-1)
+    return out
+
+
+def world_planes(positions: np.ndarray, cameras: Sequence[str] = CAMERAS) -> dict[str, np.ndarray]:
+    """True world positions (..., 3) -> each camera's plane, as the oracle reads them."""
+    return {camera: camera_plane(positions, camera) for camera in cameras}
+
+
+@dataclass(frozen=True)
+class RelationTable:
+    """Which relations hold for which objects in N images.
+
+    ``holds[relation]`` is a bool array (N, T) over the ordered object tuples
+    ``tuples[relation]`` (T, arity) of indices into ``colours``.
+    """
+
+    colours: tuple[str, ...]
+    tuples: dict[str, np.ndarray]
+    holds: dict[str, np.ndarray]
+
+    def captions(self, shape: str = "block") -> list[list[str]]:
+        """Every caption that holds, per image, as canonical goal sentences."""
+        n = next(iter(self.holds.values())).shape[0] if self.holds else 0
+        out: list[list[str]] = [[] for _ in range(n)]
+        for relation, holds in self.holds.items():
+            texts = [Task(relation, [self.colours[i] for i in t], shape).text for t in self.tuples[relation]]
+            for img, t in zip(*np.nonzero(holds)):
+                out[img].append(texts[t])
+        return out
+
+
+def relation_table(planes: Mapping[str, np.ndarray], present: np.ndarray, thresholds: Mapping[str, Thresholds],
+                   colours: Sequence[str] = COLOURS, relations: Sequence[str] = tuple(RELATIONS)) -> RelationTable:
+    """Evaluate Table 1 on N images of K objects.
+
+    planes:     camera -> (N, K, 2) coordinates in that camera's plane (y up); NaN for an object
+                that was not located (it then takes part in no relation).
+    present:    (N, K) bool, the objects in each image.
+    thresholds: camera -> the :class:`Thresholds` in that camera's units.
+    """
+    present = np.asarray(present, dtype=bool)
+    if present.ndim != 2 or present.shape[1] != len(colours):
+        raise ValueError(f"present must have shape (N, {len(colours)}), got {present.shape}")
+    tuples, holds = {}, {}
+    for name in relations:
+        if name not in RELATIONS:
+            raise ValueError(f"unknown relation {name!r}; known relations: {', '.join(RELATIONS)}")
+        rel = RELATIONS[name]
+        if rel.camera not in planes:
+            raise ValueError(f"{name} needs the {rel.camera!r} camera's coordinates")
+        if rel.camera not in thresholds:
+            raise ValueError(f"{name} needs thresholds for the {rel.camera!r} camera")
+        xy = np.asarray(planes[rel.camera], dtype=np.float64)
+        if xy.shape != present.shape + (2,):
+            raise ValueError(f"{rel.camera} coordinates must have shape {present.shape + (2,)}, got {xy.shape}")
+        t = object_tuples(rel.arity, len(colours))
+        args = [xy[:, t[:, i]] for i in range(rel.arity)]  # each (N, T, 2)
+        with np.errstate(invalid="ignore"):  # NaN coordinates compare False: no relation
+            ok = rel(*args, thresholds=thresholds[rel.camera])
+        ok &= present[:, t].all(axis=-1)
+        ok &= np.all([np.isfinite(a).all(-1) for a in args], axis=0)
+        tuples[name], holds[name] = t, ok
+    return RelationTable(tuple(colours), tuples, holds)
+
+
+class SpatialLabeler:
+    """Captions from object pixel coordinates on the front, left and tilted cameras.
+
+    thresholds: camera -> pixel :class:`Thresholds` (see :func:`pixel_thresholds`).
+    """
+
+    def __init__(self, thresholds: Mapping[str, Thresholds], shape: str = "block",
+                 colours: Sequence[str] = COLOURS, relations: Sequence[str] = tuple(RELATIONS)):
+        missing = {RELATIONS[r].camera for r in relations} - set(thresholds)
+        if missing:
+            raise ValueError(f"no thresholds for camera(s) {', '.join(sorted(missing))}")
+        self.thresholds = dict(thresholds)
+        self.shape = shape
+        self.colours = tuple(colours)
+        self.relations = tuple(relations)
+
+    @classmethod
+    def from_block_widths(cls, block_width_px: Mapping[str, float], shape: str = "block", **kwargs):
+        return cls(pixel_thresholds(block_width_px, shape), shape=shape, **kwargs)
+
+    def table(self, pixels: Mapping[str, np.ndarray], present: np.ndarray) -> RelationTable:
+        """pixels: camera -> (N, K, 2) pixel coordinates (x, row); present: (N, K) bool."""
+        return relation_table(pixel_planes(pixels), present, self.thresholds, self.colours, self.relations)
+
+    def captions(self, pixels: Mapping[str, np.ndarray], present: np.ndarray) -> list[list[str]]:
+        """Every caption that holds, for each of N images."""
+        return self.table(pixels, present).captions(self.shape)
+
+    def __call__(self, coords: Mapping[str, Mapping[str, Sequence[float]]]) -> list[str]:
+        """One image: ``{camera: {colour: (x, row)}}`` -> its captions. Objects missing from a
+        camera's mapping, or with NaN coordinates, take part in no relation that camera reads."""
+        named = {c for cam in coords.values() for c in cam}
+        unknown = named - set(self.colours)
+        if unknown:
+            raise ValueError(f"unknown colour(s) {', '.join(sorted(unknown))}; known: {', '.join(self.colours)}")
+        present = np.array([[c in named for c in self.colours]])
+        pixels = {}
+        for camera in CAMERAS:
+            xy = np.full((1, len(self.colours), 2), np.nan)
+            for i, c in enumerate(self.colours):
+                if c in coords.get(camera, {}):
+                    xy[0, i] = coords[camera][c]
+            pixels[camera] = xy
+        return self.captions(pixels, present)[0]
+
+
+def world_table(positions: np.ndarray, present: np.ndarray, colours: Sequence[str] = COLOURS,
+                thresholds: Thresholds = WORLD_THRESHOLDS, relations: Sequence[str] = tuple(RELATIONS)) -> RelationTable:
+    """The oracle's table from true world positions (N, K, 3), in metres."""
+    planes = world_planes(np.asarray(positions, dtype=np.float64))
+    return relation_table(planes, present, {c: thresholds for c in CAMERAS}, colours, relations)
