@@ -19,6 +19,7 @@ COMMAND_MODULES = [
     "zsrm.vlm.commands",  # pretrain-vlm, eval-vlm
     "zsrm.rewards.commands",  # reward, reward-curve
     "zsrm.reward_model.commands",  # finetune, eval-reward
+    "zsrm.grounding.commands",  # collect, label, eval-grounding
 ]
 
 
