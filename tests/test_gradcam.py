@@ -1,0 +1,88 @@
+"""Grad-CAM: the batched head-only gradients equal plain Grad-CAM (one full backward per
+phrase), it points at the object a phrase names, and a phrase for an absent object gives a
+clear "not found" rather than a crash."""
+import numpy as np
+import pytest
+import torch
+
+from zsrm.grounding.gradcam import GradCAM, grid_centres, locate
+from zsrm.grounding.testing import ColourVLM
+
+PHRASES = ["red block", "yellow block", "blue block"]
+
+
+def _scene(rng, size=32):
+    image = np.full((size, size, 3), 128, np.uint8)
+    image[4:10, 6:12] = (230, 30, 30)  # red
+    image[20:26, 18:24] = (250, 245, 5)  # yellow
+    image[:] = np.clip(image.astype(int) + rng.integers(0, 6, image.shape), 0, 255).astype(np.uint8)
+    return image
+
+
+def test_batched_head_gradients_equal_reference():
+    rng = np.random.default_rng(0)
+    vlm = ColourVLM(32)
+    images = np.stack([_scene(rng) for _ in range(3)])
+    for target in ("contrast", "score"):
+        cam = GradCAM(vlm, target=target, contrast=PHRASES, batch_size=2)
+        fast_maps, fast_scores = cam.heatmaps(images, PHRASES)
+        ref_maps, ref_scores = cam.reference_heatmaps(images, PHRASES)
+        assert fast_maps.shape == (3, 3, 8, 8)
+        assert fast_maps.abs().max() > 0
+        torch.testing.assert_close(fast_maps, ref_maps, atol=1e-4, rtol=1e-4)
+        torch.testing.assert_close(fast_scores, ref_scores, atol=1e-4, rtol=1e-4)
+
+
+def test_batched_equals_reference_on_a_trained_style_network():
+    """A non-linear head (not only a mean): the equality must not depend on ColourVLM's linearity."""
+    torch.manual_seed(0)
+
+    class Tiny(ColourVLM):
+        def __init__(self):
+            super().__init__(32)
+            self.mix = torch.nn.Conv2d(5, 5, 3, padding=1)
+
+        def image_head(self, features):
+            return torch.tanh(self.mix(features)).mean(dim=(-2, -1)) + features.amax(dim=(-2, -1))
+
+    vlm = Tiny()
+    images = np.stack([_scene(np.random.default_rng(i)) for i in range(2)])
+    cam = GradCAM(vlm, contrast=PHRASES)
+    fast_maps, _ = cam.heatmaps(images, PHRASES)
+    ref_maps, _ = cam.reference_heatmaps(images, PHRASES)
+    torch.testing.assert_close(fast_maps, ref_maps, atol=1e-4, rtol=1e-4)
+
+
+def test_points_at_the_named_object():
+    vlm = ColourVLM(32)
+    cam = GradCAM(vlm, contrast=PHRASES, cell_centres="grid")
+    res = cam(_scene(np.random.default_rng(1))[None], ["red block", "yellow block"])
+    assert res.found.all()
+    red, yellow = res.xy[0]
+    assert np.linalg.norm(red - (8.5, 6.5)) < 4  # (x, row) of the red square's centre
+    assert np.linalg.norm(yellow - (20.5, 22.5)) < 4
+
+
+def test_absent_object_is_not_found_not_a_crash():
+    vlm = ColourVLM(32)
+    cam = GradCAM(vlm, contrast=PHRASES)
+    res = cam(_scene(np.random.default_rng(2))[None], ["blue block", "red block"])
+    assert not res.found[0, 0] and np.isnan(res.xy[0, 0]).all()
+    assert res.score[0, 0] < 0 < res.score[0, 1]
+    assert res.found[0, 1]
+
+
+def test_bad_input_is_a_clear_error():
+    cam = GradCAM(ColourVLM(32))
+    with pytest.raises(ValueError, match="phrases"):
+        cam.heatmaps(np.zeros((1, 32, 32, 3), np.uint8), [""])
+    with pytest.raises(ValueError, match="target"):
+        GradCAM(ColourVLM(32), target="nope")
+
+
+def test_locate_argmax_and_centroid():
+    maps = np.zeros((1, 1, 4, 4))
+    maps[0, 0, 1, 2] = 1.0
+    centres = grid_centres((4, 4), (16, 16))
+    for method in ("argmax", "peak_centroid"):
+        np.testing.assert_allclose(locate(maps, centres, method)[0, 0], centres[1, 2])
