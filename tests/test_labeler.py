@@ -1,0 +1,76 @@
+"""The spatial labeler on hand-made pixel coordinates: every relation of Table 1, with the
+row flip (pixel rows point down, Table 1's y points up) and per-camera pixel thresholds."""
+import numpy as np
+import pytest
+
+from zsrm.grounding.labeler import SpatialLabeler, pixel_thresholds, world_table
+from zsrm.tasks.language import Task
+from zsrm.tasks.relations import RELATIONS, WORLD_THRESHOLDS
+
+# 6 px per 6 cm block: 100 px per metre, so gap 1 px, eps_x 3, eps_y 9, close 10, inside 2.
+LABELER = SpatialLabeler.from_block_widths({"front": 6.0, "left": 6.0, "tilted": 6.0})
+
+CASES = {
+    # relation: (coords, objects that must hold, objects that must not)
+    "left_of": ({"front": {"red": (20, 30), "yellow": (40, 30)}}, ("red", "yellow"), ("yellow", "red")),
+    "right_of": ({"front": {"red": (20, 30), "yellow": (40, 30)}}, ("yellow", "red"), ("red", "yellow")),
+    # Row 30 is higher in the image than row 36: red sits on yellow.
+    "on_top_of": ({"front": {"red": (30, 30), "yellow": (31, 36)}}, ("red", "yellow"), ("yellow", "red")),
+    "below": ({"front": {"red": (30, 30), "yellow": (31, 36)}}, ("yellow", "red"), ("red", "yellow")),
+    "in_between": ({"front": {"red": (30, 30), "yellow": (20, 30), "blue": (40, 30)}},
+                   ("red", "yellow", "blue"), ("yellow", "red", "blue")),
+    "in_front_of": ({"left": {"red": (40, 30), "yellow": (20, 30)}}, ("red", "yellow"), ("yellow", "red")),
+    "behind": ({"left": {"red": (40, 30), "yellow": (20, 30)}}, ("yellow", "red"), ("red", "yellow")),
+    "close_to": ({"tilted": {"red": (20, 20), "yellow": (25, 20), "blue": (50, 20)}},
+                 ("red", "yellow"), ("red", "blue")),
+    "inside_of": ({"tilted": {"red": (20, 20), "yellow": (21, 20), "blue": (25, 20)}},
+                  ("red", "yellow"), ("red", "blue")),
+}
+
+
+def test_cases_cover_every_relation():
+    assert set(CASES) == set(RELATIONS)
+
+
+@pytest.mark.parametrize("relation", list(CASES))
+def test_relation_from_pixels(relation):
+    coords, yes, no = CASES[relation]
+    captions = LABELER(coords)
+    assert Task(relation, yes).text in captions
+    assert Task(relation, no).text not in captions
+    # Relations read off another camera never come from this camera's coordinates.
+    camera = RELATIONS[relation].camera
+    others = [RELATIONS[r].phrase for r in RELATIONS if RELATIONS[r].camera != camera]
+    assert not any(f" {p} " in c for p in others for c in captions)
+
+
+def test_stacked_blocks_too_far_apart_are_not_on_top():
+    # 12 px up is two block widths: beyond eps_y (9 px), so not "on top of".
+    captions = LABELER({"front": {"red": (30, 24), "yellow": (30, 36)}})
+    assert Task("on_top_of", ("red", "yellow")).text not in captions
+
+
+def test_missing_or_nan_objects_take_no_part():
+    captions = LABELER({"front": {"red": (20, 30), "yellow": (np.nan, np.nan)}})
+    assert captions == []
+
+
+def test_unknown_colour_is_a_clear_error():
+    with pytest.raises(ValueError, match="unknown colour"):
+        LABELER({"front": {"purple": (1, 2)}})
+    with pytest.raises(ValueError, match="positive"):
+        pixel_thresholds({"front": 0.0})
+
+
+def test_batched_table_agrees_with_world_oracle_on_a_front_view():
+    # Front camera plane: x = world x, y = world z; 100 px per metre, row = -100 z.
+    positions = np.array([[[0.0, 0.0, 0.43], [0.2, 0.0, 0.43], [0.0, 0.0, 0.49], [0.1, 0.0, 0.43]]])
+    present = np.ones((1, 4), bool)
+    pixels = {"front": np.stack([100 * positions[..., 0], -100 * positions[..., 2]], -1)}
+    table = SpatialLabeler.from_block_widths({"front": 6.0}, relations=("left_of", "on_top_of", "in_between"))
+    got = table.table(pixels, present)
+    world = world_table(positions, present, thresholds=WORLD_THRESHOLDS,
+                        relations=("left_of", "on_top_of", "in_between"))
+    for r in ("left_of", "on_top_of", "in_between"):
+        np.testing.assert_array_equal(got.holds[r], world.holds[r])
+    assert Task("on_top_of", ("yellow", "red")).text in got.captions()[0]
