@@ -148,6 +148,7 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
             c: _summary(err[:, i])["median"] for i, c in enumerate(COLOURS) if present[:, i].any()}
         # The paper's state extractor: the argmax cell's geometric centre, from the stored maps.
         maps = lab[f"gradcam_map_{cam}"].astype(np.float32)
+        grid = list(maps.shape[-2:])
         plain = locate(maps, grid_centres(maps.shape[-2:], (size, size)), "argmax")
         s = _summary(_errors(plain, truth, present))
         report["median_px_error_argmax"][cam], report["p90_px_error_argmax"][cam] = s["median"], s["p90"]
@@ -177,6 +178,7 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
         "scenes": list(data.scenes),
         "cameras": list(data.cameras),
         "image_size": size,
+        "gradcam_grid": grid,
         "collect": data.config,
         "label": manifest["config"],
         "f1_reference": "captions from the TRUE pixel coordinates (projected object centres) through the "
@@ -186,6 +188,7 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
         "px_error": "distance from the Grad-CAM coordinates to the projection of the object's true centre, "
                     "present objects only; *_argmax: the paper's plain argmax cell centre of the same maps",
     }
+    report["meta"]["shortfalls"] = _shortfalls(report, cfg, data.block_width_px[scene0])
     return report
 
 
@@ -201,6 +204,43 @@ def _notes(report: dict) -> list[str]:
         elif support < MIN_SUPPORT:
             notes.append(f"{rel}: only {support} true instances: the F1 is noisy")
     return notes
+
+
+# The threshold of Table 1 each relation's decision turns on (what a localisation error must beat).
+_DECIDING = {"left_of": "gap", "right_of": "gap", "on_top_of": "eps_x", "below": "eps_x", "in_between": "gap",
+             "in_front_of": "gap", "behind": "gap", "close_to": "close", "inside_of": "inside"}
+
+
+def _shortfalls(report: dict, cfg: LabelConfig, widths: dict) -> list[str]:
+    """Which targets this report misses, and the numbers that say why: each short relation's
+    camera's median Grad-CAM error against the pixel threshold its decision turns on."""
+    from zsrm.grounding.labeler import pixel_thresholds
+
+    out = []
+    front = report["median_px_error"].get("front")
+    if front is not None and front > widths["front"] / 2:
+        out.append(f"localisation: front median error {front:.2f} px > half a block width "
+                   f"({widths['front'] / 2:.2f} px); the paper's plain argmax of the same maps gives "
+                   f"{report['median_px_error_argmax']['front']:.2f} px; the Grad-CAM layer's cells are "
+                   f"{report['meta']['image_size'] / report['meta']['gradcam_grid'][-1]:.0f} px wide and {report['wrong_object_rate']['front']:.0%} "
+                   "of front locations land nearer another object than the named one")
+    px = pixel_thresholds(widths, "block", cfg.world_thresholds())
+    for rel, f1 in report["f1"].items():
+        need = 0.9 if rel in ("left_of", "right_of") else 0.8
+        if f1 is not None and f1 >= need:
+            continue
+        cam = RELATIONS[rel].camera
+        name = _DECIDING[rel]
+        thr = getattr(px[cam], name)
+        f1_text = "undefined" if f1 is None else f"{f1:.2f}"
+        out.append(f"{rel}: F1 {f1_text} < {need} (P {_fmt(report['precision'][rel])}, R {_fmt(report['recall'][rel])}, "
+                   f"support {report['support'][rel]}); it is read on the {cam} camera, whose median Grad-CAM "
+                   f"error {report['median_px_error'][cam]:.2f} px is {report['median_px_error'][cam] / thr:.1f}x "
+                   f"its {name} threshold ({thr:.2f} px); even true pixel coordinates give F1 "
+                   f"{_fmt(report['f1_true_pixels_vs_world'][rel])} against the world oracle (Table 1 read off "
+                   "2-D views)" + (f"; only {report['support'][rel]} true instances" if report['support'][rel] < MIN_SUPPORT
+                                   else ""))
+    return out
 
 
 def write_tables(report: dict, csv_prefix: str | Path) -> list[Path]:
