@@ -4,7 +4,9 @@ import importlib
 
 import pytest
 
-MODULES = ["zsrm.rewards.reward_model", "zsrm.rewards.oracle", "zsrm.rewards.wrappers", "zsrm.rewards.curve"]
+# base.py's example loads the shipped scene VLM (zsrm/vlm/weights/scene).
+MODULES = ["zsrm.rewards.reward_model", "zsrm.rewards.base", "zsrm.rewards.oracle", "zsrm.rewards.wrappers",
+           "zsrm.rewards.curve"]
 
 
 @pytest.mark.parametrize("name", MODULES)
@@ -12,12 +14,3 @@ def test_docstring_examples(name):
     result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
     assert result.attempted > 0 and result.failed == 0
 
-
-def test_projection_reward_example():
-    from zsrm.rewards import base
-
-    finder = doctest.DocTestFinder()
-    runner = doctest.DocTestRunner()
-    for test in finder.find(base.projection_reward, "projection_reward", globs=vars(base)):
-        runner.run(test)
-    assert runner.summarize(verbose=False).failed == 0

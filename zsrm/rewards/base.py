@@ -61,12 +61,16 @@ class BaseReward(RewardModel):
     every call, the simple way). ``mode`` is ``"dot"``, ``"cosine"`` or ``"projection"`` (needs
     ``baseline``, a sentence describing the scene without the goal, and ``alpha`` in [0, 1]).
 
+    >>> import gymnasium as gym, zsrm.envs
     >>> from zsrm.vlm import load_vlm
-    >>> import numpy as np
-    >>> reward = BaseReward(load_vlm("open_clip:RN50:none"), camera="front", mode="cosine")
-    >>> frames = np.zeros((2, 64, 64, 3), np.uint8)
-    >>> reward({"front": frames}, "a yellow puck close to a blue puck").shape
-    (2,)
+    >>> reward = BaseReward(load_vlm("scene"), camera="front", mode="cosine")
+    >>> env = gym.make("zsrm/Pushing-v0", task="a yellow puck close to a blue puck")
+    >>> obs, info = env.reset(seed=0)
+    >>> frames = {"front": obs["front"][None]}  # a batch of one env
+    >>> r_yellow = reward(frames, "a yellow puck and a blue puck")
+    >>> r_red = reward(frames, "a red block and a green block")
+    >>> bool(r_yellow[0] > r_red[0])  # the scene VLM knows which objects are present
+    True
     """
 
     name = "base"
