@@ -4,7 +4,7 @@ Each one resumes where a killed run stopped (finished shards are kept; the manif
 to mix options).
 
     zsrm collect --out data/grounding --images 1000
-    zsrm label data/grounding --vlm scene
+    zsrm label data/grounding --vlm scene --cell-centres grid
     zsrm eval-grounding data/grounding --out results/grounding.json --figure results/figure3.png
 """
 from __future__ import annotations
@@ -53,7 +53,7 @@ def cmd_label(args) -> int:
 
     if not Path(args.data).is_dir():
         raise FileNotFoundError(f"no dataset folder {args.data}: run zsrm collect first")
-    cfg = LabelConfig(vlm=args.vlm, target=args.target, locate=args.locate, template=args.template,
+    cfg = LabelConfig(vlm=args.vlm, target=args.target, locate=args.locate, cell_centres=args.cell_centres, template=args.template,
                       batch_size=args.batch_size)
     folder = label_dataset(args.data, cfg, out=args.labels, progress=not args.quiet)
     print(f"labels (Grad-CAM captions; true-coordinate captions under {folder}/oracle, for evaluation only) "
@@ -125,6 +125,9 @@ def add_command(subparsers) -> None:
     p.add_argument("--vlm", default=lc.vlm, help="scene | a saved VLM folder | open_clip:MODEL[:TAG]")
     p.add_argument("--target", default=lc.target)
     p.add_argument("--locate", default=lc.locate)
+    p.add_argument("--cell-centres", default=lc.cell_centres, choices=("grid", "receptive_field"),
+                   help="pixel position of each Grad-CAM cell: its geometric centre, or the centroid of its "
+                        "measured input gradient (which global pooling pulls toward the image centre)")
     p.add_argument("--template", default=lc.template)
     p.add_argument("--batch-size", type=int, default=lc.batch_size)
     p.add_argument("--quiet", action="store_true")
