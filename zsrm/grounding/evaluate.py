@@ -263,8 +263,7 @@ def _shortfalls(report: dict, cfg: LabelConfig, widths: dict) -> list[str]:
                       f"{px['front'].eps_y:.2f} px): "
                       + ("the two blocks' maps overlap and their points merge"
                          if report['stacked_pairs']['median_dy_px_gradcam'] < report['stacked_pairs']['median_dy_px_true']
-                         else "each point is pushed away from the other block (likely, not verified: the contrast target "
-                              "gives the other colour's cells negative weight)")
+                         else "each point is pushed away from the other block, often past eps_y")
                       if rel in ("on_top_of", "below") and report["stacked_pairs"].get("n") else ""))
     return out
 
