@@ -189,7 +189,8 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
                     "present objects only; *_argmax: the paper's plain argmax cell centre of the same maps",
     }
     report["stacked_pairs"] = _stacked_pairs(pixels["front"], truth_pixels["front"],
-                                             _tables(data, cfg, truth_pixels, present, scene_index))
+                                             _tables(data, cfg, truth_pixels, present, scene_index),
+                                             labelers(data, cfg)[scene0].thresholds["front"])
     report["meta"]["shortfalls"] = _shortfalls(report, cfg, data.block_width_px[scene0])
     return report
 
@@ -213,7 +214,7 @@ _DECIDING = {"left_of": "gap", "right_of": "gap", "on_top_of": "eps_x", "below":
              "in_front_of": "gap", "behind": "gap", "close_to": "close", "inside_of": "inside"}
 
 
-def _stacked_pairs(xy: np.ndarray, truth: np.ndarray, table: RelationTable) -> dict:
+def _stacked_pairs(xy: np.ndarray, truth: np.ndarray, table: RelationTable, thresholds=None) -> dict:
     """On the front camera, for the pairs that truly are "on top of": the median vertical and
     horizontal separation in pixels of the true centres and of the Grad-CAM points."""
     holds = table.holds["on_top_of"]
@@ -226,6 +227,10 @@ def _stacked_pairs(xy: np.ndarray, truth: np.ndarray, table: RelationTable) -> d
         d = pts[n, b] - pts[n, a]  # the lower block minus the upper one: +row is down
         out[f"median_dy_px_{name}"] = float(np.nanmedian(d[:, 1]))
         out[f"median_abs_dx_px_{name}"] = float(np.nanmedian(np.abs(d[:, 0])))
+        if thresholds is not None:  # which of on_top_of's conditions the points break
+            out[f"share_dx_over_eps_x_{name}"] = float((np.abs(d[:, 0]) >= thresholds.eps_x).mean())
+            out[f"share_dy_outside_gap_eps_y_{name}"] = float(((d[:, 1] <= thresholds.gap)
+                                                              | (d[:, 1] >= thresholds.eps_y)).mean())
     return out
 
 
@@ -259,11 +264,12 @@ def _shortfalls(report: dict, cfg: LabelConfig, widths: dict) -> list[str]:
                    "2-D views)" + (f"; only {report['support'][rel]} true instances" if report['support'][rel] < MIN_SUPPORT
                                    else "")
                    + (f"; on true stacked pairs the Grad-CAM points are {report['stacked_pairs']['median_dy_px_gradcam']:.2f} px "
-                      f"apart vertically (true {report['stacked_pairs']['median_dy_px_true']:.2f} px, eps_y "
-                      f"{px['front'].eps_y:.2f} px): "
-                      + ("the two blocks' maps overlap and their points merge"
-                         if report['stacked_pairs']['median_dy_px_gradcam'] < report['stacked_pairs']['median_dy_px_true']
-                         else "each point is pushed away from the other block, often past eps_y")
+                      f"apart vertically (true {report['stacked_pairs']['median_dy_px_true']:.2f} px) and "
+                      f"{report['stacked_pairs']['median_abs_dx_px_gradcam']:.2f} px sideways (true "
+                      f"{report['stacked_pairs']['median_abs_dx_px_true']:.2f} px); "
+                      f"{report['stacked_pairs']['share_dx_over_eps_x_gradcam']:.0%} of them break |dx| < eps_x "
+                      f"({px['front'].eps_x:.2f} px) and "
+                      f"{report['stacked_pairs']['share_dy_outside_gap_eps_y_gradcam']:.0%} gap < dy < eps_y"
                       if rel in ("on_top_of", "below") and report["stacked_pairs"].get("n") else ""))
     return out
 
