@@ -86,3 +86,18 @@ def test_locate_argmax_and_centroid():
     centres = grid_centres((4, 4), (16, 16))
     for method in ("argmax", "peak_centroid"):
         np.testing.assert_allclose(locate(maps, centres, method)[0, 0], centres[1, 2])
+
+
+def test_receptive_field_centres_of_a_pooled_layer_are_its_cells():
+    # Cells that are 4x4 average pools of a linear 1x1 layer see exactly their own 4x4 pixels,
+    # so each measured centre must be the cell's geometric centre (no ReLU: no dead pixels).
+    from zsrm.grounding.gradcam import receptive_field_centres
+
+    class Linear(ColourVLM):
+        def image_trunk(self, pixels):
+            return self.pool(self.detect[0](pixels))
+
+    vlm = Linear(32)
+    pixels = vlm.preprocess(np.stack([_scene(np.random.default_rng(i)) for i in range(2)]))
+    np.testing.assert_allclose(receptive_field_centres(vlm, pixels, (32, 32)), grid_centres((8, 8), (32, 32)),
+                               atol=1e-6)
