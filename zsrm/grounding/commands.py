@@ -4,7 +4,7 @@ Each one resumes where a killed run stopped (finished shards are kept; the manif
 to mix options).
 
     zsrm collect --out data/grounding --images 1000
-    zsrm label data/grounding --vlm scene --cell-centres grid
+    zsrm label data/grounding --vlm scene
     zsrm eval-grounding data/grounding --out results/grounding.json --figure results/figure3.png
 """
 from __future__ import annotations
