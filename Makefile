@@ -20,6 +20,13 @@ test: setup
 results: setup
 	$(VENV)/bin/zsrm scripted-eval --episodes 20 --out results/scripted_success.json
 	$(PY) benchmarks/env_speed.py --out results/env_speed.json
+	$(VENV)/bin/zsrm eval-vlm --vlm scene --images 500 --seed 0 --out results/vlm_presence.json
+	$(PY) benchmarks/reward_batching.py --out results/reward_batching.json
+	$(VENV)/bin/zsrm reward-curve --out results/figure5
+	$(VENV)/bin/zsrm collect --out data/grounding --images 1000
+	$(VENV)/bin/zsrm label data/grounding --vlm scene
+	$(VENV)/bin/zsrm eval-grounding data/grounding --out results/grounding.json --figure results/figure3.png
+	$(PY) benchmarks/gradcam_speed.py --out results/gradcam_speed.json
 
 clean:
 	rm -rf reports .pytest_cache
