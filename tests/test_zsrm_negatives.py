@@ -103,3 +103,11 @@ def test_no_negative_read_on_the_goals_camera_holds_whenever_the_goal_does(relat
     for neg in [n for n in negative_tasks(task) if RELATIONS[n.relation].camera == camera]:
         holds = holds_in_world(neg.relation, [xyz[:, index[c]] for c in neg.objects], WORLD_THRESHOLDS)
         assert holds[goal].mean() < 0.9, f"{neg.text} holds with {task.text}"
+
+
+def test_close_to_ranks_against_its_complement_and_the_complement_against_it():
+    close = "a blue puck close to a yellow puck"
+    far = "a blue puck far from a yellow puck"
+    assert negative_texts(close)[-1] == far
+    assert candidate_texts(far) == [far, close]
+    assert not any("far from" in t for r in RELATIONS if r != "close_to" for t in negative_texts(task_of(r)))

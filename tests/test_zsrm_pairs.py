@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from zsrm.reward_model.pairs import CaptionedImages, caption_camera, caption_relation
+from zsrm.reward_model.pairs import CaptionedImages, caption_camera, caption_relation, complement_captions
 from zsrm.reward_model.testing import synthetic_pairs
 
 FRONT = "a red block on the left of a blue block"
@@ -12,9 +12,9 @@ LEFT = "a red block behind a blue block"
 TILTED = "a red block close to a blue block"
 
 
-def three_cameras(n, captions, groups=None):
+def three_cameras(n, captions, groups=None, objects=None):
     images = {c: np.full((n, 8, 8, 3), i, np.uint8) for i, c in enumerate(("front", "left", "tilted"))}
-    return CaptionedImages(images, captions, groups)
+    return CaptionedImages(images, captions, groups, objects)
 
 
 def test_each_caption_pairs_with_the_camera_its_relation_is_read_on():
@@ -78,8 +78,20 @@ def test_reads_a_labelled_dataset_and_only_its_gradcam_captions(tmp_path):
     from zsrm.data.dataset import ExplorationData
 
     gradcam = ExplorationData(folder).captions()
-    assert len(data) == 8 and data.captions == gradcam
+    assert len(data) == 8
+    for caps, grad in zip(data.captions, gradcam):  # the Grad-CAM captions, then their complements
+        assert caps[:len(grad)] == grad and all(" far from " in c for c in caps[len(grad):])
     assert set(data.cameras) == {"front", "left", "tilted"}
     assert "a green block inside of a blue block" not in data.pair_texts()
     # Episodes are numbered per shard; groups stay distinct across shards.
     assert len(np.unique(data.groups[:6])) and not set(data.groups[:6]) & set(data.groups[6:])
+
+
+def test_complements_say_far_from_where_the_labeler_found_no_close_to():
+    caps = ["a red block close to a blue block", "a blue block close to a red block"]
+    out = complement_captions(caps, ["red", "blue", "green"], "block")
+    assert sorted(out) == sorted(["a red block far from a green block", "a green block far from a red block",
+                                  "a blue block far from a green block", "a green block far from a blue block"])
+    data = three_cameras(1, [caps], objects=[("block", ["red", "blue", "green"])])
+    assert set(data.pair_texts()) == set(caps) | set(out)
+    assert all(caption_camera(t) == "tilted" for t in out)

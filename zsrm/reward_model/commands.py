@@ -104,6 +104,10 @@ def add_command(sub):
                         "text tower embeds the goal texts")
     p.add_argument("--student", action="store_true", help="train the small student network from scratch")
     p.add_argument("--student-arch", dest="student_arch", choices=("default", "tiny"))
+    p.add_argument("--spatial-grid", dest="spatial_grid", type=int,
+                   help="grid of the position-aware read-out added to the VLM's image head (default 4; 0: none)")
+    p.add_argument("--text-adapter", dest="text_adapter", type=int,
+                   help="hidden units of the whitened-text read-out added to the VLM's text tower (default 256; 0: none)")
     p.add_argument("--out", help="model folder (default runs/zsrm/vlm, or runs/zsrm/student with --student)")
     p.add_argument("--workdir", help="checkpoint and log folder (default OUT.work)")
     p.add_argument("--steps", type=int)

@@ -15,10 +15,12 @@ relation in the swapped order.
 
 >>> [t.text for t in negative_tasks(Task("on_top_of", ("yellow", "red")))][:3]
 ['a yellow block on the left of a red block', 'a yellow block on the right of a red block', 'a yellow block below a red block']
->>> negative_texts("a blue puck close to a yellow puck")[-1]  # close to is symmetric: no swap
-'a blue puck inside of a yellow puck'
+>>> negative_texts("a blue puck close to a yellow puck")[-2:]  # symmetric: no swap; a complement
+['a blue puck inside of a yellow puck', 'a blue puck far from a yellow puck']
 """
 from __future__ import annotations
+
+import re
 
 from zsrm.tasks.language import GoalError, Task, parse_goal
 from zsrm.tasks.relations import RELATIONS
@@ -31,6 +33,34 @@ SYMMETRIC = frozenset({"close_to", "inside_of"})
 # "a between b and c" means a is right of one and left of the other; "inside of" is "close
 # to" with a smaller distance (Table 1).
 IMPLIED_BY = {"in_between": frozenset({"left_of", "right_of"}), "inside_of": frozenset({"close_to"})}
+
+
+# Table 1 has no words for "none of this camera's relations holds". On the front and left
+# cameras one of a pair's relations nearly always holds (left or right, in front or behind),
+# but two objects on the tilted camera are often neither close nor inside: without a text for
+# that, "close to" would win the argmax against "inside of" on every frame. The complement
+# of close to, "far from", is a caption when neither holds (:func:`complement_captions`) and a
+# negative of close to.
+COMPLEMENTS = {"close_to": ("far_from", "far from")}
+COMPLEMENT_CAMERA = {name: RELATIONS[rel].camera for rel, (name, _) in COMPLEMENTS.items()}
+_COMPLEMENT_RE = {name: re.compile(rf"^a (\w+) (\w+) {words} a (\w+) (\w+)$") for name, words in COMPLEMENTS.values()}
+
+
+def complement_text(task: Task) -> str | None:
+    """The sentence saying the task's relation does not hold, for relations that have one."""
+    if task.relation not in COMPLEMENTS:
+        return None
+    a, b = task.phrases
+    return f"a {a} {COMPLEMENTS[task.relation][1]} a {b}"
+
+
+def caption_relation_camera(caption: str) -> tuple[str, str]:
+    """(relation name, camera it is read on) of a caption: a Table 1 sentence or a complement."""
+    for name, pattern in _COMPLEMENT_RE.items():
+        if pattern.match(caption):
+            return name, COMPLEMENT_CAMERA[name]
+    relation = parse_goal(caption).relation
+    return relation, RELATIONS[relation].camera
 
 
 def as_task(goal: str | Task) -> Task:
@@ -78,11 +108,31 @@ def negative_tasks(task: str | Task) -> list[Task]:
 
 
 def negative_texts(task: str | Task) -> list[str]:
-    """Canonical texts of :func:`negative_tasks`."""
-    return [t.text for t in negative_tasks(task)]
+    """Canonical texts of :func:`negative_tasks`, then the relation's complement if it has one
+    ("a blue puck far from a yellow puck" for "a blue puck close to a yellow puck")."""
+    task = as_task(task)
+    complement = complement_text(task)
+    return [t.text for t in negative_tasks(task)] + ([complement] if complement else [])
+
+
+def complement_of(caption: str) -> Task | None:
+    """For a complement caption ("a red block far from a blue block") the task it denies."""
+    for relation, (name, _) in COMPLEMENTS.items():
+        m = _COMPLEMENT_RE[name].match(caption)
+        if m:
+            colour_a, shape_a, colour_b, shape_b = m.groups()
+            return Task(relation, (colour_a, colour_b), shape_a)
+    return None
 
 
 def candidate_texts(task: str | Task) -> list[str]:
-    """The goal's canonical text first, then its negatives: what the binarised reward ranks."""
+    """The goal's canonical text first, then its negatives: what the binarised reward ranks.
+
+    A complement caption (a training caption, not a goal) ranks against the relation it denies.
+    """
+    if isinstance(task, str):
+        denied = complement_of(task.strip())
+        if denied is not None:
+            return [complement_text(denied), denied.text]
     task = as_task(task)
     return [task.text] + negative_texts(task)

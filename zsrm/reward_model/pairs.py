@@ -23,20 +23,32 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from zsrm.reward_model.negatives import candidate_texts
-from zsrm.tasks.language import parse_goal
-from zsrm.tasks.relations import RELATIONS
+from zsrm.reward_model.negatives import COMPLEMENTS, caption_relation_camera, candidate_texts, complement_text
+from zsrm.tasks.language import Task
 
 
 @lru_cache(maxsize=None)
 def caption_camera(caption: str) -> str:
     """The camera a caption's relation is read on."""
-    return RELATIONS[parse_goal(caption).relation].camera
+    return caption_relation_camera(caption)[1]
 
 
 @lru_cache(maxsize=None)
 def caption_relation(caption: str) -> str:
-    return parse_goal(caption).relation
+    return caption_relation_camera(caption)[0]
+
+
+def complement_captions(captions: Sequence[str], colours: Sequence[str], shape: str) -> list[str]:
+    """Complement captions of one image: "a far from b" for every ordered pair of its objects
+    between which the labeler found no "close to" (see :data:`~zsrm.reward_model.negatives.COMPLEMENTS`)."""
+    have = set(captions)
+    out = []
+    for relation in COMPLEMENTS:
+        for a in colours:
+            for b in colours:
+                if a != b and Task(relation, (a, b), shape).text not in have:
+                    out.append(complement_text(Task(relation, (a, b), shape)))
+    return out
 
 
 class CaptionedImages:
@@ -46,10 +58,12 @@ class CaptionedImages:
     captions: N lists of canonical goal sentences (may be empty).
     groups:   (N,) ints; images of one group (an exploration episode) are never split
               between training and validation, as consecutive frames look alike.
+    objects:  optional (shape, colours) of each image's scene (the object list the labeler
+              reads too); with it, complement captions are added (:func:`complement_captions`).
     """
 
     def __init__(self, images: Mapping[str, np.ndarray], captions: Sequence[Sequence[str]],
-                 groups: Sequence[int] | None = None):
+                 groups: Sequence[int] | None = None, objects: Sequence[tuple[str, Sequence[str]]] | None = None):
         self.images = {c: np.asarray(v) for c, v in images.items()}
         sizes = {len(v) for v in self.images.values()}
         if len(sizes) != 1:
@@ -61,6 +75,11 @@ class CaptionedImages:
             if v.ndim != 4 or v.shape[-1] != 3 or v.dtype != np.uint8:
                 raise ValueError(f"images[{c!r}] must be (N, H, W, 3) uint8, got {v.dtype} {v.shape}")
         self.captions = [list(c) for c in captions]
+        if objects is not None:
+            if len(objects) != n:
+                raise ValueError(f"{len(objects)} object lists for {n} images")
+            self.captions = [caps + complement_captions(caps, colours, shape)
+                             for caps, (shape, colours) in zip(self.captions, objects)]
         self.groups = np.arange(n) if groups is None else np.asarray(groups, dtype=np.int64)
         if self.groups.shape != (n,):
             raise ValueError(f"groups must have shape ({n},), got {self.groups.shape}")
@@ -106,6 +125,7 @@ class CaptionedImages:
 
     def subset(self, rows: np.ndarray) -> "CaptionedImages":
         rows = np.asarray(rows, dtype=np.int64)
+        # Captions already hold their complements: none are added again.
         return CaptionedImages({c: v[rows] for c, v in self.images.items()},
                                [self.captions[r] for r in rows], self.groups[rows])
 
@@ -150,16 +170,20 @@ class CaptionedImages:
 
     @classmethod
     def from_dataset(cls, folder: str | Path, labels: str | Path = "labels") -> "CaptionedImages":
-        """A collected and labelled dataset folder; the Grad-CAM captions of ``labels``."""
+        """A collected and labelled dataset folder: its images, the Grad-CAM captions of
+        ``labels`` and, for the complements, each scene's object list (what the labeler reads)."""
+        from zsrm.data.collect import SHAPE_OF
         from zsrm.data.dataset import ExplorationData
 
         data = ExplorationData(folder)
         captions = data.captions(labels)  # Grad-CAM captions only (oracle=None)
-        images, groups = {c: [] for c in data.cameras}, []
+        images, groups, objects = {c: [] for c in data.cameras}, [], []
         for s, name in enumerate(data.shards):
-            arrays = data.shard(name, [f"images_{c}" for c in data.cameras] + ["episode"])
+            arrays = data.shard(name, [f"images_{c}" for c in data.cameras] + ["episode", "present", "scene"])
             for c in data.cameras:
                 images[c].append(arrays[f"images_{c}"])
             # Episodes are numbered within a shard: make the group ids unique across shards.
             groups.append(s * 1_000_000 + arrays["episode"].astype(np.int64))
-        return cls({c: np.concatenate(v) for c, v in images.items()}, captions, np.concatenate(groups))
+            objects += [(SHAPE_OF[data.scenes[sc]], [c for c, p in zip(data.colours, row) if p])
+                        for sc, row in zip(arrays["scene"], arrays["present"])]
+        return cls({c: np.concatenate(v) for c, v in images.items()}, captions, np.concatenate(groups), objects)

@@ -2,8 +2,9 @@
 
 The paper reports that training on the generated data from scratch works well. The student
 is a four-layer CNN at 64 px whose last feature map is flattened (not pooled), so where an
-object is stays in the embedding; its text side is a frozen VLM's text embedding (computed
-once per text and cached) through a small trainable MLP. It implements the
+object is stays in the embedding; its text side is a frozen VLM's text embeddings of the
+sentence and of its object phrases in order (:class:`~zsrm.reward_model.text.RoleTextFeatures`,
+computed once per text and cached) through a small trainable MLP. It implements the
 :class:`~zsrm.vlm.base.VisionLanguageModel` interface, so it trains with the same loop as
 the VLM and plugs into the same rewards.
 
@@ -25,6 +26,7 @@ import numpy as np  # noqa: F401  (doctest)
 import torch
 from torch import nn
 
+from zsrm.reward_model.text import RoleTextFeatures
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel, pixels_from_images
 
 BACKEND = "zsrm-student"
@@ -78,7 +80,8 @@ class StudentRewardNet(VisionLanguageModel):
         self.text_vlm_spec = str(text_vlm_spec)
         with torch.no_grad():
             text_dim = text_vlm.encode_texts(["a red block on the left of a blue block"]).shape[-1]
-        self.text_proj = nn.Sequential(nn.Linear(text_dim, config.text_hidden), nn.ReLU(),
+        self.text_features = RoleTextFeatures(text_dim)
+        self.text_proj = nn.Sequential(nn.Linear(self.text_features.out_dim, config.text_hidden), nn.ReLU(),
                                        nn.Linear(config.text_hidden, config.embed_dim))
         self.logit_scale = nn.Parameter(torch.tensor(math.log(1 / 0.07)))
         self.meta: dict = dict(meta or {})
@@ -107,7 +110,11 @@ class StudentRewardNet(VisionLanguageModel):
         return torch.stack([self._frozen_text[t] for t in texts]).to(self.device)
 
     def encode_text_tokens(self, texts: list[str]) -> torch.Tensor:
-        return self.text_proj(self.frozen_text_features(texts))
+        return self.text_proj(self.text_features(self.frozen_text_features, list(texts)))
+
+    def fit_text_statistics(self, texts: list[str]) -> None:
+        """Whiten the frozen text embeddings with the statistics of these (training) texts."""
+        self.text_features.fit(self.frozen_text_features, list(texts))
 
     # --- persistence ---------------------------------------------------------------------
     def save(self, folder: str | Path) -> None:
@@ -134,10 +141,8 @@ class StudentRewardNet(VisionLanguageModel):
         if cfg.get("text_vlm_is_folder"):
             spec = str((folder / spec).resolve())
         if text_vlm is None:
-            from zsrm.vlm import load_vlm
-
             try:
-                text_vlm = load_vlm(spec, device=device)
+                text_vlm = load_reward_backbone(spec, device=device)
             except (FileNotFoundError, ValueError) as err:
                 raise FileNotFoundError(f"the student in {folder} embeds texts with the VLM {spec!r}, "
                                         f"which does not load: {err}") from None
@@ -159,20 +164,31 @@ def read_student_config(folder: Path) -> dict:
     return cfg
 
 
-def is_student_folder(spec) -> bool:
+def folder_backend(spec) -> str | None:
+    """The ``backend`` a saved model folder's config.json names (None if ``spec`` is not one)."""
     path = Path(str(spec)).expanduser()
     if not (path / CONFIG_FILE).is_file():
-        return False
+        return None
     try:
-        return json.loads((path / CONFIG_FILE).read_text()).get("backend") == BACKEND
+        return json.loads((path / CONFIG_FILE).read_text()).get("backend")
     except json.JSONDecodeError:
-        return False
+        return None
+
+
+def is_student_folder(spec) -> bool:
+    return folder_backend(spec) == BACKEND
 
 
 def load_reward_backbone(spec: str | Path, device: str | torch.device = "cpu") -> VisionLanguageModel:
-    """A fine-tuned VLM or a student from its folder, or any ``load_vlm`` spec (the base VLM)."""
-    if is_student_folder(spec):
+    """A model folder written by ``zsrm finetune`` (fine-tuned VLM or student), or any
+    ``load_vlm`` spec (e.g. ``scene``, the base VLM)."""
+    backend = folder_backend(spec)
+    if backend == BACKEND:
         return StudentRewardNet.from_folder(spec, device)
+    from zsrm.reward_model.adapted import BACKEND as ADAPTED, AdaptedVLM
+
+    if backend == ADAPTED:
+        return AdaptedVLM.from_folder(spec, device)
     from zsrm.vlm import load_vlm
 
     return load_vlm(str(spec), device=device)

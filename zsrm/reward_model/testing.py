@@ -62,7 +62,8 @@ def synthetic_pairs(n: int, size: int = 32, width: int | None = None, colours=("
 class TaskTextVLM(VisionLanguageModel):
     """A test double whose text tower knows the task structure and whose image tower is the
     mean colour: the student's frozen text side in fast tests. A text embeds to one-hots of
-    its relation and of the colour of each of its (up to three) objects."""
+    its relation and of the colour of each of its (up to three) objects; an object phrase
+    ("red block") to the one-hot of its colour."""
 
     backend = "testing-task-text"
     gradcam_layer = "none"
@@ -87,6 +88,10 @@ class TaskTextVLM(VisionLanguageModel):
         relations, k = list(RELATIONS), len(COLOURS)
         out = torch.zeros(len(texts), len(relations) + 3 * k)
         for i, text in enumerate(texts):
+            words = text.split()
+            if len(words) == 2 and words[0] in COLOURS:  # an object phrase, "red block"
+                out[i, len(relations) + COLOURS.index(words[0])] = 1.0
+                continue
             task = parse_goal(text)
             out[i, relations.index(task.relation)] = 1.0
             for j, colour in enumerate(task.objects):

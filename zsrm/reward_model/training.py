@@ -52,6 +52,8 @@ class FinetuneConfig:
     vlm: str = "scene"  # the VLM to start from (or, for the student, whose text tower it uses)
     student: bool = False
     student_arch: str = "default"  # a key of STUDENT_PRESETS
+    spatial_grid: int = 4  # position-aware read-out added to the VLM's image head (0: none)
+    text_adapter: int = 256  # hidden units of the whitened-text read-out added to its text tower (0: none)
     steps: int = 1500
     batch_size: int = 128
     lr: float = 0.0  # 0: 3e-4 to fine-tune a VLM, 1e-3 for a student from scratch
@@ -68,7 +70,7 @@ class FinetuneConfig:
     threads: int = 0  # torch threads; 0 keeps torch's default
 
     # Settings that define the run: a checkpoint made with others cannot be resumed.
-    IDENTITY = ("data", "labels", "vlm", "student", "student_arch", "steps", "batch_size", "lr", "weight_decay",
+    IDENTITY = ("data", "labels", "vlm", "student", "student_arch", "spatial_grid", "text_adapter", "steps", "batch_size", "lr", "weight_decay",
                 "warmup_steps", "hard_negative_weight", "balance", "shift", "val_fraction", "seed")
 
     def __post_init__(self):
@@ -79,6 +81,8 @@ class FinetuneConfig:
             raise ValueError("batch_size must be >= 2: a contrastive batch needs negatives")
         if self.student and self.student_arch not in STUDENT_PRESETS:
             raise ValueError(f"unknown student architecture {self.student_arch!r}; known: {', '.join(STUDENT_PRESETS)}")
+        if self.spatial_grid < 0 or self.text_adapter < 0:
+            raise ValueError(f"spatial_grid and text_adapter must be >= 0, got {self.spatial_grid}, {self.text_adapter}")
         if self.lr < 0 or self.weight_decay < 0 or self.hard_negative_weight < 0 or self.shift < 0:
             raise ValueError("lr, weight_decay, hard_negative_weight and shift must be >= 0")
         if not self.lr:
@@ -92,14 +96,18 @@ class FinetuneConfig:
 
 # --- model -------------------------------------------------------------------------------------
 def initial_model(cfg: FinetuneConfig) -> VisionLanguageModel:
-    """The model before training: the VLM itself, or a fresh student on the VLM's text tower."""
+    """The model before training: the VLM with zero-initialised image and text adapters (see
+    :mod:`zsrm.reward_model.adapted`), or a fresh student on the VLM's text tower."""
+    from zsrm.reward_model.adapted import AdaptedVLM
     from zsrm.reward_model.student import StudentConfig, StudentRewardNet, load_reward_backbone
 
     torch.manual_seed(cfg.seed)
     vlm = load_reward_backbone(cfg.vlm)
-    if not cfg.student:
-        return vlm
-    return StudentRewardNet(StudentConfig(**STUDENT_PRESETS[cfg.student_arch]), vlm, cfg.vlm)
+    if cfg.student:
+        return StudentRewardNet(StudentConfig(**STUDENT_PRESETS[cfg.student_arch]), vlm, cfg.vlm)
+    if (cfg.spatial_grid or cfg.text_adapter) and not isinstance(vlm, (AdaptedVLM, StudentRewardNet)):
+        return AdaptedVLM(vlm, cfg.spatial_grid, cfg.text_adapter)
+    return vlm
 
 
 def _optimizer(model: nn.Module, cfg: FinetuneConfig) -> torch.optim.Optimizer:
@@ -268,6 +276,9 @@ def finetune(cfg: FinetuneConfig, data: CaptionedImages | None = None, model: Vi
     model.train()
     opt = _optimizer(model, cfg)
     start, log = 0, []
+    fit = getattr(model, "fit_text_statistics", None)
+    if callable(fit):  # statistics of the training captions and their negatives (restored on resume)
+        fit(train.vocabulary())
     if (ckpt / "state.json").exists():
         start, log = _load_checkpoint(ckpt, model, opt, cfg)
         if progress:

@@ -1,0 +1,146 @@
+"""A VLM with two adapters for spatial captions: the model ``zsrm finetune`` trains by default.
+
+The VLM stays whole (its trunk, head and text tower all train); two residual read-outs are
+added, each starting at zero, so that before training the model *is* the VLM:
+
+* image: where things are. CLIP's RN50 pools its last feature map with attention and
+  positional embeddings, so its embedding can carry positions; the ``scene`` stand-in pools
+  with mean and max, which throws positions away. The image adapter adds a linear read-out of
+  the Grad-CAM layer's map pooled to a ``grid`` x ``grid`` layout.
+* text: which relation, in which order. A text tower that learned which objects a scene
+  holds gives "a yellow block on the left of a red block", "... on the right of ..." and "a red
+  block on the left of a yellow block" nearly the same embedding; the text adapter adds an MLP
+  of the whitened sentence embedding and the embeddings of its object phrases in order
+  (:class:`~zsrm.reward_model.text.RoleTextFeatures`), whitened on the training captions.
+
+>>> import numpy as np, torch
+>>> from zsrm.vlm import create_scene_vlm
+>>> vlm = create_scene_vlm("tiny", seed=0, image_size=32)
+>>> model = AdaptedVLM(vlm, grid=4)
+>>> x = np.zeros((2, 32, 32, 3), np.uint8)
+>>> torch.equal(model.encode_images(x), vlm.encode_images(x))  # identical before training
+True
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from zsrm.reward_model.text import RoleTextFeatures
+from zsrm.vlm.base import ImageBatch, VisionLanguageModel
+
+BACKEND = "zsrm-adapted"
+CONFIG_FILE = "config.json"
+ADAPTERS_FILE = "adapters.safetensors"
+
+
+class AdaptedVLM(VisionLanguageModel):
+    """``image_head(f) = base.image_head(f) + W . flatten(avgpool_grid(f))`` (``grid`` 0: no image
+    adapter) and ``text(t) = base.text(t) + MLP(role_features(t))`` (``text_hidden`` 0: none)."""
+
+    backend = BACKEND
+
+    def __init__(self, base: VisionLanguageModel, grid: int = 4, text_hidden: int = 256, meta: dict | None = None):
+        super().__init__()
+        if grid < 0 or text_hidden < 0:
+            raise ValueError(f"grid and text_hidden must be >= 0, got {grid} and {text_hidden}")
+        self.base = base
+        self.grid = int(grid)
+        self.text_hidden = int(text_hidden)
+        self.image_size = base.image_size
+        self.gradcam_layer = f"base.{base.gradcam_layer}" if base.gradcam_layer else None
+        self.meta: dict = dict(meta or {})
+        self.spatial = None
+        self.text_norm = self.text_adapter = None
+        if self.text_hidden:
+            with torch.no_grad():
+                text_dim = base.encode_text_tokens(["a red block on the left of a blue block"]).shape[-1]
+            self.text_norm = RoleTextFeatures(text_dim)
+            self.text_adapter = nn.Sequential(nn.Linear(self.text_norm.out_dim, self.text_hidden), nn.ReLU(),
+                                              nn.Linear(self.text_hidden, text_dim))
+            nn.init.zeros_(self.text_adapter[-1].weight)
+            nn.init.zeros_(self.text_adapter[-1].bias)
+        if not self.grid:
+            return
+        try:
+            with torch.no_grad():
+                probe = base.image_trunk(base.preprocess(torch.zeros(1, base.image_size, base.image_size, 3,
+                                                                     dtype=torch.uint8)))
+                dim = base.image_head(probe).shape[-1]
+        except (NotImplementedError, RuntimeError, ValueError) as err:
+            raise ValueError(f"a spatial head needs the VLM's image trunk (a conv feature map), which this "
+                             f"{base.backend} model does not expose ({err}); fine-tune with --spatial-grid 0") from None
+        if probe.ndim != 4:
+            raise ValueError(f"the VLM's trunk gives {probe.ndim}-D features, not a (N, C, h, w) map; "
+                             "fine-tune with --spatial-grid 0")
+        self.spatial = nn.Sequential(nn.AdaptiveAvgPool2d(self.grid), nn.Flatten(),
+                                     nn.Linear(probe.shape[1] * self.grid * self.grid, dim))
+        nn.init.zeros_(self.spatial[-1].weight)
+        nn.init.zeros_(self.spatial[-1].bias)
+
+    @property
+    def logit_scale(self) -> nn.Parameter:
+        return self.base.logit_scale
+
+    def preprocess(self, images: ImageBatch) -> torch.Tensor:
+        return self.base.preprocess(images)
+
+    def image_trunk(self, pixels: torch.Tensor) -> torch.Tensor:
+        return self.base.image_trunk(pixels)
+
+    def image_head(self, features: torch.Tensor) -> torch.Tensor:
+        out = self.base.image_head(features)
+        return out + self.spatial(features) if self.spatial is not None else out
+
+    def encode_images(self, images: ImageBatch, normalize: bool = True) -> torch.Tensor:
+        if self.spatial is None:  # e.g. an open_clip ViT, whose trunk is not split off
+            return self.base.encode_images(images, normalize)
+        return super().encode_images(images, normalize)
+
+    def encode_text_tokens(self, texts: list[str]) -> torch.Tensor:
+        e = self.base.encode_text_tokens(texts)
+        if self.text_adapter is None:
+            return e
+        return e + self.text_adapter(self.text_norm(self.base.encode_text_tokens, list(texts), sentence=e))
+
+    def fit_text_statistics(self, texts: list[str]) -> None:
+        """Whiten the text adapter's input with the statistics of these (training) texts."""
+        if self.text_norm is not None:
+            self.text_norm.fit(self.base.encode_text_tokens, list(texts))
+
+    # --- persistence: the base VLM in its own format in base/, the read-out beside it ----
+    def save(self, folder: str | Path) -> None:
+        from safetensors.torch import save_model
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        self.base.save(folder / "base")
+        adapters = nn.ModuleDict({k: m for k, m in (("spatial", self.spatial), ("text_norm", self.text_norm),
+                                                    ("text_adapter", self.text_adapter)) if m is not None})
+        save_model(adapters, str(folder / ADAPTERS_FILE))
+        (folder / CONFIG_FILE).write_text(json.dumps({"backend": BACKEND, "grid": self.grid,
+                                                      "text_hidden": self.text_hidden,
+                                                      "base_backend": self.base.backend, "meta": self.meta},
+                                                     indent=2) + "\n")
+
+    @classmethod
+    def from_folder(cls, folder: str | Path, device: str | torch.device = "cpu") -> "AdaptedVLM":
+        from safetensors.torch import load_model
+
+        from zsrm.vlm.factory import load_folder
+
+        folder = Path(folder)
+        cfg = json.loads((folder / CONFIG_FILE).read_text())
+        if cfg.get("backend") != BACKEND:
+            raise ValueError(f"{folder} holds a {cfg.get('backend')!r} model, not a spatial-head VLM")
+        model = cls(load_folder(folder / "base", device), grid=cfg["grid"], text_hidden=cfg["text_hidden"],
+                    meta=cfg.get("meta"))
+        if not (folder / ADAPTERS_FILE).is_file():
+            raise FileNotFoundError(f"no {ADAPTERS_FILE} in {folder}")
+        adapters = nn.ModuleDict({k: m for k, m in (("spatial", model.spatial), ("text_norm", model.text_norm),
+                                                    ("text_adapter", model.text_adapter)) if m is not None})
+        load_model(adapters, str(folder / ADAPTERS_FILE), strict=True, device=str(device))
+        return model.to(device).eval()
