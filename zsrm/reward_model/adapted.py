@@ -11,12 +11,16 @@ added, each starting at zero, so that before training the model *is* the VLM:
   holds gives "a yellow block on the left of a red block", "... on the right of ..." and "a red
   block on the left of a yellow block" nearly the same embedding; the text adapter adds an MLP
   of the whitened sentence embedding and the embeddings of its object phrases in order
-  (:class:`~zsrm.reward_model.text.RoleTextFeatures`), whitened on the training captions.
+  (:class:`~zsrm.reward_model.text.RoleTextFeatures`), whitened on the training captions. Its
+  input comes from a frozen copy of the VLM as it was before fine-tuning (``reference``,
+  loaded again from its spec, not saved): whitening magnifies small directions of the
+  embedding, and reading them off the text tower being trained would feed the adapter a
+  moving input.
 
 >>> import numpy as np, torch
 >>> from zsrm.vlm import create_scene_vlm
 >>> vlm = create_scene_vlm("tiny", seed=0, image_size=32)
->>> model = AdaptedVLM(vlm, grid=4)
+>>> model = AdaptedVLM(vlm, grid=4, reference=create_scene_vlm("tiny", seed=0, image_size=32), reference_spec="tiny")
 >>> x = np.zeros((2, 32, 32, 3), np.uint8)
 >>> torch.equal(model.encode_images(x), vlm.encode_images(x))  # identical before training
 True
@@ -24,6 +28,7 @@ True
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import torch
@@ -43,7 +48,9 @@ class AdaptedVLM(VisionLanguageModel):
 
     backend = BACKEND
 
-    def __init__(self, base: VisionLanguageModel, grid: int = 4, text_hidden: int = 256, meta: dict | None = None):
+    def __init__(self, base: VisionLanguageModel, grid: int = 4, text_hidden: int = 256,
+                 reference: VisionLanguageModel | None = None, reference_spec: str | None = None,
+                 meta: dict | None = None):
         super().__init__()
         if grid < 0 or text_hidden < 0:
             raise ValueError(f"grid and text_hidden must be >= 0, got {grid} and {text_hidden}")
@@ -56,8 +63,14 @@ class AdaptedVLM(VisionLanguageModel):
         self.spatial = None
         self.text_norm = self.text_adapter = None
         if self.text_hidden:
+            if reference is None or reference_spec is None:
+                raise ValueError("a text adapter needs the frozen reference VLM and its spec")
+            # Frozen and kept out of this module's parameters and weights (loaded from its spec).
+            self.__dict__["reference"] = reference.eval().requires_grad_(False)
+            self.reference_spec = str(reference_spec)
+            self._reference_cache: dict[str, torch.Tensor] = {}
             with torch.no_grad():
-                text_dim = base.encode_text_tokens(["a red block on the left of a blue block"]).shape[-1]
+                text_dim = reference.encode_text_tokens(["a red block on the left of a blue block"]).shape[-1]
             self.text_norm = RoleTextFeatures(text_dim)
             self.text_adapter = nn.Sequential(nn.Linear(self.text_norm.out_dim, self.text_hidden), nn.ReLU(),
                                               nn.Linear(self.text_hidden, text_dim))
@@ -104,12 +117,24 @@ class AdaptedVLM(VisionLanguageModel):
         e = self.base.encode_text_tokens(texts)
         if self.text_adapter is None:
             return e
-        return e + self.text_adapter(self.text_norm(self.base.encode_text_tokens, list(texts), sentence=e))
+        return e + self.text_adapter(self.text_norm(self.reference_texts, list(texts))).to(e.dtype)
+
+    def reference_texts(self, texts: list[str]) -> torch.Tensor:
+        """The frozen reference VLM's text embeddings, computed once per text."""
+        missing = list(dict.fromkeys(t for t in texts if t not in self._reference_cache))
+        if missing:
+            with torch.no_grad():
+                self._reference_cache.update(zip(missing, self.reference.encode_text_tokens(missing).float().cpu()))
+        return torch.stack([self._reference_cache[t] for t in texts]).to(self._device)
+
+    @property
+    def _device(self) -> torch.device:
+        return self.logit_scale.device
 
     def fit_text_statistics(self, texts: list[str]) -> None:
         """Whiten the text adapter's input with the statistics of these (training) texts."""
         if self.text_norm is not None:
-            self.text_norm.fit(self.base.encode_text_tokens, list(texts))
+            self.text_norm.fit(self.reference_texts, list(texts))
 
     # --- persistence: the base VLM in its own format in base/, the read-out beside it ----
     def save(self, folder: str | Path) -> None:
@@ -121,10 +146,14 @@ class AdaptedVLM(VisionLanguageModel):
         adapters = nn.ModuleDict({k: m for k, m in (("spatial", self.spatial), ("text_norm", self.text_norm),
                                                     ("text_adapter", self.text_adapter)) if m is not None})
         save_model(adapters, str(folder / ADAPTERS_FILE))
-        (folder / CONFIG_FILE).write_text(json.dumps({"backend": BACKEND, "grid": self.grid,
-                                                      "text_hidden": self.text_hidden,
-                                                      "base_backend": self.base.backend, "meta": self.meta},
-                                                     indent=2) + "\n")
+        config = {"backend": BACKEND, "grid": self.grid, "text_hidden": self.text_hidden,
+                  "base_backend": self.base.backend, "meta": self.meta}
+        if self.text_hidden:
+            spec, is_folder = self.reference_spec, Path(self.reference_spec).is_dir()
+            if is_folder:  # a folder moves with this one when both move together
+                spec = os.path.relpath(Path(spec).resolve(), folder.resolve())
+            config.update(reference=spec, reference_is_folder=is_folder)
+        (folder / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
 
     @classmethod
     def from_folder(cls, folder: str | Path, device: str | torch.device = "cpu") -> "AdaptedVLM":
@@ -132,12 +161,22 @@ class AdaptedVLM(VisionLanguageModel):
 
         from zsrm.vlm.factory import load_folder
 
+        from zsrm.reward_model.student import load_reward_backbone
+
         folder = Path(folder)
         cfg = json.loads((folder / CONFIG_FILE).read_text())
         if cfg.get("backend") != BACKEND:
-            raise ValueError(f"{folder} holds a {cfg.get('backend')!r} model, not a spatial-head VLM")
+            raise ValueError(f"{folder} holds a {cfg.get('backend')!r} model, not an adapted VLM")
+        reference = spec = None
+        if cfg["text_hidden"]:
+            spec = str((folder / cfg["reference"]).resolve()) if cfg.get("reference_is_folder") else cfg["reference"]
+            try:
+                reference = load_reward_backbone(spec, device)
+            except (FileNotFoundError, ValueError) as err:
+                raise FileNotFoundError(f"the model in {folder} reads texts through the VLM {spec!r}, "
+                                        f"which does not load: {err}") from None
         model = cls(load_folder(folder / "base", device), grid=cfg["grid"], text_hidden=cfg["text_hidden"],
-                    meta=cfg.get("meta"))
+                    reference=reference, reference_spec=spec, meta=cfg.get("meta"))
         if not (folder / ADAPTERS_FILE).is_file():
             raise FileNotFoundError(f"no {ADAPTERS_FILE} in {folder}")
         adapters = nn.ModuleDict({k: m for k, m in (("spatial", model.spatial), ("text_norm", model.text_norm),

@@ -56,6 +56,7 @@ def _cmd_eval_reward(args):
     results["meta"] = {
         "command": "zsrm " + " ".join(sys.argv[1:]),
         "models": names,
+        "training": {k: _training_summary(v) for k, v in names.items() if k != "base"},
         "frames": {t: {"n": len(f), "positives": int(f.success.sum()), "camera": f.camera, "goal": f.goal,
                        "scripted": int((f.source == "scripted").sum()), "random": int((f.source == "random").sum())}
                    for t, f in frames.items()},
@@ -93,6 +94,18 @@ def _cmd_eval_reward(args):
         print(row)
     print(f"wrote {out}")
     return 0 if np.isfinite([results[k][t]["f1"] for k in models for t in tasks]).all() else 1
+
+
+def _training_summary(folder: str) -> dict | None:
+    """What ``zsrm finetune`` recorded about a model: its settings and held-out accuracy."""
+    path = Path(folder) / "training.json"
+    if not path.is_file():
+        return None
+    d = json.loads(path.read_text())
+    val = d.get("validation", {})
+    return {"config": d.get("config"), "train_pairs": d.get("train_pairs"), "train_seconds": d.get("train_seconds"),
+            "val_pairs_scored": val.get("pairs"),
+            "val_argmax_accuracy_vs_gradcam_labels": val.get("argmax_accuracy")}
 
 
 def add_command(sub):

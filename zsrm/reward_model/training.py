@@ -106,7 +106,9 @@ def initial_model(cfg: FinetuneConfig) -> VisionLanguageModel:
     if cfg.student:
         return StudentRewardNet(StudentConfig(**STUDENT_PRESETS[cfg.student_arch]), vlm, cfg.vlm)
     if (cfg.spatial_grid or cfg.text_adapter) and not isinstance(vlm, (AdaptedVLM, StudentRewardNet)):
-        return AdaptedVLM(vlm, cfg.spatial_grid, cfg.text_adapter)
+        # The text adapter reads a frozen copy of the VLM as it was: load it a second time.
+        reference = load_reward_backbone(cfg.vlm) if cfg.text_adapter else None
+        return AdaptedVLM(vlm, cfg.spatial_grid, cfg.text_adapter, reference=reference, reference_spec=cfg.vlm)
     return vlm
 
 
