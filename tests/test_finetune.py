@@ -206,5 +206,8 @@ def test_bad_settings_are_one_line_errors():
         FinetuneConfig(batch_size=1)
     with pytest.raises(ValueError, match="student architecture"):
         FinetuneConfig(student=True, student_arch="huge")
-    assert FinetuneConfig(student=True).lr == 1e-3 and FinetuneConfig().lr == 3e-4
+    with pytest.raises(ValueError, match="lr must be > 0"):
+        FinetuneConfig(lr=0.0)
+    with pytest.raises(ValueError, match=">= 0"):
+        FinetuneConfig(shift=-1)
     assert FinetuneConfig(out="runs/x/vlm").workdir.endswith("vlm.work")

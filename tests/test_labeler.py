@@ -74,3 +74,16 @@ def test_batched_table_agrees_with_world_oracle_on_a_front_view():
     for r in ("left_of", "on_top_of", "in_between"):
         np.testing.assert_array_equal(got.holds[r], world.holds[r])
     assert Task("on_top_of", ("yellow", "red")).text in got.captions()[0]
+
+
+def test_table_cameras_are_read_in_metres():
+    """A homography maps the tilted camera's pixels onto the table; its thresholds stay in
+    metres while the other cameras' are scaled to pixels."""
+    to_metres = np.diag([0.01, -0.01, 1.0])  # 1 px = 1 cm, rows down = y toward the camera
+    th = pixel_thresholds({"front": 6.0, "tilted": 7.0}, table_cameras={"tilted"})
+    assert th["tilted"] == WORLD_THRESHOLDS and th["front"].close == pytest.approx(10.0)
+    labeler = SpatialLabeler(th, relations=("close_to",), table_homography={"tilted": to_metres})
+    near = {"tilted": {"red": (20, 30), "yellow": (28, 30)}}  # 8 cm apart
+    far = {"tilted": {"red": (20, 30), "yellow": (20, 42)}}  # 12 cm apart
+    assert labeler(near) == ["a red block close to a yellow block", "a yellow block close to a red block"]
+    assert labeler(far) == []

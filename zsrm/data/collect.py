@@ -110,6 +110,17 @@ def block_widths(cfg: CollectConfig) -> dict[str, dict[str, float]]:
         envs.close()
 
 
+def table_homographies(cfg: CollectConfig) -> dict[str, dict[str, list]]:
+    """Pixel -> table-metres maps of the table-plane cameras, per scene (calibration only)."""
+    from zsrm.envs.cameras import table_homographies as of_env
+
+    envs = _Envs(cfg)
+    try:
+        return {s: of_env(envs.get(s, cfg.colours[:2]), cfg.image_size, cfg.cameras) for s in cfg.scenes}
+    finally:
+        envs.close()
+
+
 def collect_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> dict[str, np.ndarray]:
     """The arrays of shard ``index``: a function of ``cfg`` and ``index`` only."""
     from zsrm.envs.cameras import project
@@ -161,7 +172,8 @@ def collect(cfg: CollectConfig, folder, progress: bool = True) -> ExplorationDat
     from tqdm import tqdm
 
     shards = ShardFolder(folder, kind="exploration", config=cfg.to_json(), n_shards=cfg.n_shards,
-                         extra={"colours": list(COLOURS), "block_width_px": block_widths(cfg)})
+                         extra={"colours": list(COLOURS), "block_width_px": block_widths(cfg),
+                                "table_homography": table_homographies(cfg)})
     pending = shards.pending()
     bar = tqdm(total=cfg.images, initial=cfg.images - sum(_shard_len(cfg, i) for i in pending),
                unit="img", desc="collect", disable=not progress)

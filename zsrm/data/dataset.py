@@ -30,6 +30,8 @@ class ExplorationData:
         self.scenes: tuple[str, ...] = tuple(self.config["scenes"])
         self.cameras: tuple[str, ...] = tuple(self.config["cameras"])
         self.block_width_px: dict[str, dict[str, float]] = self.manifest["block_width_px"]
+        # scene -> camera -> pixel-to-table map of the tilted camera (absent in older folders)
+        self.table_homography: dict[str, dict[str, list]] = self.manifest.get("table_homography", {})
 
     @property
     def shards(self) -> list[str]:

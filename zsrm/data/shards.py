@@ -90,6 +90,10 @@ class ShardFolder:
                     f"{self.folder} was made with other options ({', '.join(diff)} differ); "
                     "rerun with the same options to resume, or write to another folder")
             self.manifest = manifest
+            missing = {k: v for k, v in (extra or {}).items() if k not in manifest}
+            if missing:  # folders from before a field existed (e.g. camera calibration) gain it
+                manifest.update(missing)
+                save_json(self.folder / MANIFEST, manifest)
         else:
             self.manifest = {"format": FORMAT, "kind": kind, "config": config, "n_shards": n_shards,
                              "complete": False, "shards": {}, **(extra or {})}

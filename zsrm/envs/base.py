@@ -74,6 +74,7 @@ class MujocoPixelEnv(gym.Env):
     asset: str
     shape: str  # "block" or "puck": the object bodies are named f"{shape}_{colour}"
     object_half_size: float
+    rest_height: float  # height of an object's centre above the table when it rests on it
     frame_skip = 8  # 8 x 5 ms = one 0.04 s control step
 
     def __init__(self, task, cameras=("front",), image_size: int = 64, spread: str = "seen",
@@ -186,7 +187,7 @@ class MujocoPixelEnv(gym.Env):
                     layout[colour] = base + (*rng.uniform(-0.3 * h, 0.3 * h, 2), 2 * h)
                     continue
             for _ in range(1000):
-                p = np.array([rng.uniform(-0.22, 0.22), rng.uniform(-0.14, 0.14), TABLE_TOP + self._rest_height])
+                p = np.array([rng.uniform(-0.22, 0.22), rng.uniform(-0.14, 0.14), TABLE_TOP + self.rest_height])
                 if all(np.linalg.norm(p[:2] - q[:2]) > 2.6 * h for q in layout.values()):
                     break
             layout[colour] = p

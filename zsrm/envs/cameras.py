@@ -17,7 +17,7 @@ import mujoco
 import numpy as np
 
 from zsrm.envs.base import TABLE_TOP
-from zsrm.tasks.relations import CAMERAS
+from zsrm.tasks.relations import CAMERAS, TABLE_PLANE_CAMERAS
 
 
 def _camera_id(model: mujoco.MjModel, camera: str) -> int:
@@ -71,6 +71,37 @@ def object_width_px(env, camera: str, size: int, half_size: float | None = None,
     right = rot[:, 0]
     a, b = project(base, camera, np.stack([centre - half * right, centre + half * right]), size)
     return float(np.linalg.norm(a - b))
+
+
+def table_homography(env, camera: str, size: int, height: float | None = None) -> np.ndarray:
+    """3x3 matrix taking pixel coordinates ``(x, row, 1)`` of a point at ``height`` (the centre of
+    an object resting on the table by default) to its table coordinates ``(x, y, 1)`` in metres, up to scale.
+
+    This is camera calibration, not state: it lets the labeler read "close to" on the tilted
+    camera in metres, where pixel distances shrink by half from the near to the far edge of the
+    table and the table's depth shows at sin 45 deg of its length.
+    """
+    base = getattr(env, "unwrapped", env)
+    pos, rot, fovy = camera_frame(base, camera)
+    z = TABLE_TOP + base.rest_height if height is None else height
+    focal = 0.5 * size / np.tan(np.deg2rad(fovy) / 2)
+    c = 0.5 * size - 0.5
+    # (X, Y, 1) -> camera-axis coordinates, then -> (u w, v w, w) with w the depth (see project).
+    to_camera = np.column_stack([rot.T[:, 0], rot.T[:, 1], rot.T @ (np.array([0.0, 0.0, z]) - pos)])
+    to_pixels = np.array([[focal, 0.0, -c], [0.0, -focal, -c], [0.0, 0.0, -1.0]])
+    return np.linalg.inv(to_pixels @ to_camera)
+
+
+def table_homographies(env, size: int, cameras=CAMERAS) -> dict[str, list[list[float]]]:
+    """:func:`table_homography` of each camera that reads the table plane (JSON-ready)."""
+    return {cam: table_homography(env, cam, size).tolist() for cam in cameras if cam in TABLE_PLANE_CAMERAS}
+
+
+def apply_homography(h, xy) -> np.ndarray:
+    """``(..., 2)`` points through a 3x3 homography (NaN stays NaN)."""
+    xy = np.asarray(xy, dtype=np.float64)
+    out = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1) @ np.asarray(h, np.float64).T
+    return out[..., :2] / out[..., 2:]
 
 
 def object_pixels(env, cameras=CAMERAS, size: int | None = None) -> dict[str, dict[str, np.ndarray]]:

@@ -31,7 +31,7 @@ class PushingEnv(MujocoPixelEnv):
     shape = "puck"
     object_half_size = PUCK_HALF
 
-    _rest_height = PUCK_HALF_HEIGHT
+    rest_height = PUCK_HALF_HEIGHT
 
     def __init__(self, task="push_close", cameras=("front",), image_size=64, spread="seen", render_mode=None,
                  objects=None):

@@ -36,7 +36,7 @@ class TabletopEnv(MujocoPixelEnv):
     shape = "block"
     object_half_size = BLOCK_HALF
 
-    _rest_height = BLOCK_HALF
+    rest_height = BLOCK_HALF
 
     def __init__(self, task="stack", cameras=("front",), image_size=64, spread="seen",
                  action_mode: str | None = None, render_mode=None, objects=None):

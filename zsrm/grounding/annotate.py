@@ -108,10 +108,14 @@ class Grounder:
 
 
 def labelers(data: ExplorationData, cfg: LabelConfig) -> dict[str, SpatialLabeler]:
-    """The labeler of each scene: its shape's words, its cameras' pixel thresholds."""
-    return {scene: SpatialLabeler(pixel_thresholds(data.block_width_px[scene], SHAPE_OF[scene],
-                                                   cfg.world_thresholds()), shape=SHAPE_OF[scene])
-            for scene in data.scenes}
+    """The labeler of each scene: its shape's words, its cameras' pixel thresholds, and the
+    tilted camera read on the table in metres when the data has its calibration."""
+    out = {}
+    for scene in data.scenes:
+        table = data.table_homography.get(scene, {})
+        thresholds = pixel_thresholds(data.block_width_px[scene], SHAPE_OF[scene], cfg.world_thresholds(), table)
+        out[scene] = SpatialLabeler(thresholds, shape=SHAPE_OF[scene], table_homography=table)
+    return out
 
 
 def captions_from_pixels(data: ExplorationData, cfg: LabelConfig, pixels: dict, present: np.ndarray,

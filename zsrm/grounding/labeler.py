@@ -32,16 +32,17 @@ OBJECT_WIDTH = {"block": 0.06, "puck": 0.07}
 
 
 def pixel_thresholds(block_width_px: Mapping[str, float], shape: str = "block",
-                     world: Thresholds = WORLD_THRESHOLDS) -> dict[str, Thresholds]:
+                     world: Thresholds = WORLD_THRESHOLDS, table_cameras=()) -> dict[str, Thresholds]:
     """Per-camera pixel thresholds: the world thresholds scaled by pixels per metre, measured
-    as an object's width in pixels on that camera over its width in metres."""
+    as an object's width in pixels on that camera over its width in metres. Cameras in
+    ``table_cameras`` are read in table metres (see :class:`SpatialLabeler`) and keep ``world``."""
     if shape not in OBJECT_WIDTH:
         raise ValueError(f"unknown shape {shape!r}; known shapes: {', '.join(OBJECT_WIDTH)}")
     out = {}
     for camera, width in block_width_px.items():
         if not width > 0:
             raise ValueError(f"block width on camera {camera!r} must be positive, got {width}")
-        out[camera] = world.scaled(width / OBJECT_WIDTH[shape])
+        out[camera] = world if camera in table_cameras else world.scaled(width / OBJECT_WIDTH[shape])
     return out
 
 
@@ -51,12 +52,20 @@ def object_tuples(arity: int, k: int) -> np.ndarray:
     return np.array(tuples, dtype=np.int64).reshape(len(tuples), arity)
 
 
-def pixel_planes(pixels: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Pixel coordinates (x, row) -> Table 1's plane (x right, y up): flip the row."""
+def pixel_planes(pixels: Mapping[str, np.ndarray], table_homography: Mapping[str, np.ndarray] | None = None
+                 ) -> dict[str, np.ndarray]:
+    """Pixel coordinates (x, row) -> Table 1's plane (x right, y up): flip the row. Cameras
+    with a table homography (:func:`zsrm.envs.cameras.table_homography`) are mapped onto the
+    table instead, in metres, the plane :func:`zsrm.tasks.relations.camera_plane` gives them."""
+    from zsrm.envs.cameras import apply_homography
+
     out = {}
     for camera, xy in pixels.items():
         xy = np.asarray(xy, dtype=np.float64)
-        out[camera] = np.stack([xy[..., 0], -xy[..., 1]], axis=-1)
+        if table_homography and camera in table_homography:
+            out[camera] = apply_homography(table_homography[camera], xy)
+        else:
+            out[camera] = np.stack([xy[..., 0], -xy[..., 1]], axis=-1)
     return out
 
 
@@ -126,14 +135,20 @@ class SpatialLabeler:
     """Captions from object pixel coordinates on the front, left and tilted cameras.
 
     thresholds: camera -> pixel :class:`Thresholds` (see :func:`pixel_thresholds`).
+    table_homography: camera -> 3x3 pixel-to-table map. Those cameras' coordinates are read
+    in metres on the table, so their thresholds must be in metres: on the tilted camera a
+    pixel distance means twice as much at the far edge of the table as at the near one, and
+    with one pixel threshold "close to" labels had precision 0.29 even from true coordinates.
     """
 
     def __init__(self, thresholds: Mapping[str, Thresholds], shape: str = "block",
-                 colours: Sequence[str] = COLOURS, relations: Sequence[str] = tuple(RELATIONS)):
+                 colours: Sequence[str] = COLOURS, relations: Sequence[str] = tuple(RELATIONS),
+                 table_homography: Mapping[str, np.ndarray] | None = None):
         missing = {RELATIONS[r].camera for r in relations} - set(thresholds)
         if missing:
             raise ValueError(f"no thresholds for camera(s) {', '.join(sorted(missing))}")
         self.thresholds = dict(thresholds)
+        self.table_homography = {c: np.asarray(h, np.float64) for c, h in (table_homography or {}).items()}
         self.shape = shape
         self.colours = tuple(colours)
         self.relations = tuple(relations)
@@ -144,7 +159,7 @@ class SpatialLabeler:
 
     def table(self, pixels: Mapping[str, np.ndarray], present: np.ndarray) -> RelationTable:
         """pixels: camera -> (N, K, 2) pixel coordinates (x, row); present: (N, K) bool."""
-        return relation_table(pixel_planes(pixels), present, self.thresholds, self.colours, self.relations)
+        return relation_table(pixel_planes(pixels, self.table_homography), present, self.thresholds, self.colours, self.relations)
 
     def captions(self, pixels: Mapping[str, np.ndarray], present: np.ndarray) -> list[list[str]]:
         """Every caption that holds, for each of N images."""

@@ -125,7 +125,7 @@ def add_command(sub):
     p.add_argument("--workdir", help="checkpoint and log folder (default OUT.work)")
     p.add_argument("--steps", type=int)
     p.add_argument("--batch-size", dest="batch_size", type=int)
-    p.add_argument("--lr", type=float, help="peak learning rate (default 3e-4, or 1e-3 with --student)")
+    p.add_argument("--lr", type=float, help="peak learning rate (default 1e-3)")
     p.add_argument("--weight-decay", dest="weight_decay", type=float)
     p.add_argument("--warmup-steps", dest="warmup_steps", type=int)
     p.add_argument("--hard-negative-weight", dest="hard_negative_weight", type=float,

@@ -3,9 +3,10 @@
 Two models train with the same loop:
 
 * the fine-tuned VLM (default): starts from a VLM (``scene``, ``open_clip:RN50``, a folder)
-  and trains both towers;
+  and trains both towers, with two zero-initialised adapters for where things are and who is
+  where in the sentence (:mod:`zsrm.reward_model.adapted`);
 * the student (``student=True``): a small CNN from scratch whose text side is the VLM's
-  frozen text embedding through an MLP (:mod:`zsrm.reward_model.student`).
+  frozen text embeddings through an MLP (:mod:`zsrm.reward_model.student`).
 
 The loss is the multi-positive contrastive loss of :mod:`zsrm.vlm.losses` (identical captions
 in a batch are positives of each other, not negatives) plus, with weight
@@ -56,7 +57,7 @@ class FinetuneConfig:
     text_adapter: int = 256  # hidden units of the whitened-text read-out added to its text tower (0: none)
     steps: int = 1500
     batch_size: int = 128
-    lr: float = 0.0  # 0: 3e-4 to fine-tune a VLM, 1e-3 for a student from scratch
+    lr: float = 1e-3
     weight_decay: float = 0.05
     warmup_steps: int = 100
     hard_negative_weight: float = 1.0
@@ -83,10 +84,10 @@ class FinetuneConfig:
             raise ValueError(f"unknown student architecture {self.student_arch!r}; known: {', '.join(STUDENT_PRESETS)}")
         if self.spatial_grid < 0 or self.text_adapter < 0:
             raise ValueError(f"spatial_grid and text_adapter must be >= 0, got {self.spatial_grid}, {self.text_adapter}")
-        if self.lr < 0 or self.weight_decay < 0 or self.hard_negative_weight < 0 or self.shift < 0:
-            raise ValueError("lr, weight_decay, hard_negative_weight and shift must be >= 0")
-        if not self.lr:
-            self.lr = 1e-3 if self.student else 3e-4
+        if not self.lr > 0:
+            raise ValueError(f"lr must be > 0, got {self.lr}")
+        if self.weight_decay < 0 or self.hard_negative_weight < 0 or self.shift < 0:
+            raise ValueError("weight_decay, hard_negative_weight and shift must be >= 0")
         if not self.workdir:
             self.workdir = str(Path(self.out).with_name(Path(self.out).name + ".work"))
 

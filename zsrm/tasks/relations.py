@@ -127,6 +127,11 @@ RELATIONS: dict[str, Relation] = {
 }
 
 
+# Cameras whose plane is the table top (see camera_plane): the labeler can map their pixel
+# coordinates onto the table with the camera's calibration and read them in metres.
+TABLE_PLANE_CAMERAS = frozenset({"tilted"})
+
+
 def camera_plane(xyz, camera: str) -> np.ndarray:
     """World positions ``(..., 3)`` (x right, y away from the front camera, z up) to the
     2-D coordinates of a camera's plane as the oracle reads them.
