@@ -35,6 +35,7 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--labels", default="labels-zsrm", help="labels folder inside OUT")
     p.add_argument("--eps-y", type=float, default=0.12, help="on top of / below: largest height offset (m)")
+    p.add_argument("--close", type=float, default=0.10, help="close to: largest centre distance (m)")
     args = p.parse_args(argv)
 
     from zsrm.data.collect import CollectConfig, collect
@@ -43,7 +44,8 @@ def main(argv=None) -> int:
 
     collect(CollectConfig(images=args.images, shard_size=args.shard_size, seed=args.seed,
                           scenes=("tabletop", "pushing")), args.out)
-    cfg = LabelConfig(cell_centres="grid", thresholds={**asdict(WORLD_THRESHOLDS), "eps_y": args.eps_y})
+    cfg = LabelConfig(cell_centres="grid", thresholds={**asdict(WORLD_THRESHOLDS), "eps_y": args.eps_y,
+                                                                "close": args.close})
     folder = label_dataset(args.out, cfg, out=args.labels)
     print(f"labelled data in {args.out} (labels: {folder})")
     return 0

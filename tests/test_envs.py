@@ -146,6 +146,19 @@ def test_exploration_scene_has_the_requested_objects():
     assert not info["is_success"]
 
 
+def test_exploration_objects_start_side_by_side_when_asked():
+    """p_side=1 puts every object after the first beside one already placed (2-3 half-widths)."""
+    env = PushingEnv(task=None, objects=("red", "blue"), image_size=16)
+    h = env.object_half_size
+    gaps = []
+    for seed in range(10):
+        _, info = env.reset(seed=seed, options={"p_side": 1.0})
+        p = info["object_positions"]
+        gaps.append(np.linalg.norm(p["red"][:2] - p["blue"][:2]))
+    assert all(2.0 * h < g < 3.1 * h for g in gaps), gaps
+    env.close()
+
+
 def test_bad_input_gets_clear_errors():
     with pytest.raises(ValueError, match="known cameras: front, left, tilted"):
         TabletopEnv("stack", cameras=("top",))

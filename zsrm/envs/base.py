@@ -158,10 +158,10 @@ class MujocoPixelEnv(gym.Env):
         """Half-range of the uniform start noise: one object width in all (seen), two (unseen)."""
         return self.object_half_size * (1.0 if self.spread == "seen" else 2.0)
 
-    def _sample_layout(self) -> dict[str, np.ndarray]:
+    def _sample_layout(self, options: dict | None = None) -> dict[str, np.ndarray]:
         """Initial positions that do not overlap and are not already in the goal relation."""
         if self.task is None:
-            return self._random_layout()
+            return self._random_layout(**(options or {}))
         rel = self.task.relation
         for _ in range(1000):
             layout = self._initial_layout()
@@ -176,8 +176,11 @@ class MujocoPixelEnv(gym.Env):
     def _initial_layout(self) -> dict[str, np.ndarray]:
         raise NotImplementedError
 
-    def _random_layout(self, p_stack: float = 0.25) -> dict[str, np.ndarray]:
-        """Exploration: objects anywhere on the table; blocks sometimes start stacked."""
+    def _random_layout(self, p_stack: float = 0.25, p_side: float = 0.0) -> dict[str, np.ndarray]:
+        """Exploration: objects anywhere on the table; with probability ``p_stack`` a block
+        starts stacked on another, with ``p_side`` an object starts beside another (centres 2
+        to 3 half-widths apart). Random actions alone rarely bring two objects together, so
+        without these, exploration data would hardly show "on top of" or touching objects."""
         rng, h = self.np_random, self.object_half_size
         layout: dict[str, np.ndarray] = {}
         for colour in self.objects:
@@ -185,6 +188,18 @@ class MujocoPixelEnv(gym.Env):
                 base = layout[list(layout)[rng.integers(len(layout))]]
                 if not any(np.allclose(p[:2], base[:2]) and p[2] > base[2] for p in layout.values()):
                     layout[colour] = base + (*rng.uniform(-0.3 * h, 0.3 * h, 2), 2 * h)
+                    continue
+            if layout and rng.random() < p_side:
+                base = layout[list(layout)[rng.integers(len(layout))]]
+                for _ in range(100):  # directions that stay on the table and clear of the others
+                    angle, dist = rng.uniform(0, 2 * np.pi), rng.uniform(2.05 * h, 3.0 * h)
+                    p = np.array([base[0] + dist * np.cos(angle), base[1] + dist * np.sin(angle),
+                                  TABLE_TOP + self.rest_height])
+                    if (abs(p[0]) < 0.22 and abs(p[1]) < 0.14
+                            and all(np.linalg.norm(p[:2] - q[:2]) > 2.05 * h for q in layout.values())):
+                        layout[colour] = p
+                        break
+                if colour in layout:
                     continue
             for _ in range(1000):
                 p = np.array([rng.uniform(-0.22, 0.22), rng.uniform(-0.14, 0.14), TABLE_TOP + self.rest_height])
@@ -198,7 +213,8 @@ class MujocoPixelEnv(gym.Env):
         super().reset(seed=seed)
         mujoco.mj_resetData(self.model, self.data)
         self._park_unused()
-        for colour, xyz in self._sample_layout().items():
+        # options (exploration scenes only): p_stack, p_side of :meth:`_random_layout`
+        for colour, xyz in self._sample_layout(options).items():
             self._set_object(colour, xyz)
         self._reset_agent()
         mujoco.mj_forward(self.model, self.data)

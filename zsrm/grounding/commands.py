@@ -42,7 +42,7 @@ def cmd_collect(args) -> int:
     cfg = CollectConfig(images=args.images, shard_size=args.shard_size, seed=args.seed, scenes=_csv(args.scenes),
                         cameras=_csv(args.cameras), image_size=args.image_size, min_objects=args.min_objects,
                         max_objects=args.max_objects, exclude=_csv(args.exclude), episode_steps=args.episode_steps,
-                        record_every=args.record_every)
+                        record_every=args.record_every, p_stack=args.p_stack, p_side=args.p_side)
     data = collect(cfg, args.out, progress=not args.quiet)
     print(f"{len(data)} images x {len(cfg.cameras)} cameras in {args.out} ({len(data.shards)} shards)")
     return 0
@@ -112,6 +112,8 @@ def add_command(subparsers) -> None:
     p.add_argument("--exclude", default="", help="colours never placed, comma list")
     p.add_argument("--episode-steps", type=int, default=d.episode_steps)
     p.add_argument("--record-every", type=int, default=d.record_every)
+    p.add_argument("--p-stack", type=float, default=d.p_stack, help="chance a block starts stacked on another")
+    p.add_argument("--p-side", type=float, default=d.p_side, help="chance an object starts beside another")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_collect)
 
