@@ -67,6 +67,8 @@ def test_cli_missing_inputs_are_one_line_errors(tmp_path):
     proc = _zsrm("eval-reward", "--zsrm", str(tmp_path / "nope"))
     assert proc.returncode == 2 and "train it with zsrm finetune" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
+    proc = _zsrm("eval-reward", "--compare", "base=x")
+    assert proc.returncode == 2 and "NAME=FOLDER" in proc.stderr
 
 
 def test_cli_eval_reward_writes_the_table_and_curves(tmp_path):
@@ -75,11 +77,12 @@ def test_cli_eval_reward_writes_the_table_and_curves(tmp_path):
     create_scene_vlm("tiny", seed=0).save(tmp_path / "vlm")
     out = tmp_path / "eval.json"
     proc = _zsrm("eval-reward", "--zsrm", str(tmp_path / "vlm"), "--base", str(tmp_path / "vlm"), "--tasks",
-                 "place_left", "--scripted-episodes", "1", "--random-episodes", "1", "--every", "10",
+                 "place_left", "--compare", f"again={tmp_path / 'vlm'}", "--scripted-episodes", "1", "--random-episodes", "1", "--every", "10",
                  "--out", str(out), "--curves", str(tmp_path / "curves"), "--curve-steps", "5", "--quiet")
     assert proc.returncode == 0, proc.stderr
     res = json.loads(out.read_text())
-    assert {"zsrm", "base", "meta"} <= set(res)
+    assert {"zsrm", "again", "base", "meta"} <= set(res)
+    assert res["again"]["place_left"] == res["zsrm"]["place_left"]  # the same model, reported twice
     assert 0.0 <= res["zsrm"]["place_left"]["f1"] <= 1.0 and "f1" in res["base"]["place_left"]
     assert (tmp_path / "curves" / "place_left.png").stat().st_size > 0
     header = (tmp_path / "curves" / "place_left.csv").read_text().splitlines()[0]

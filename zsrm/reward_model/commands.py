@@ -30,21 +30,19 @@ def _cmd_eval_reward(args):
     from zsrm.rewards.zsrm import ZSRMReward
 
     tasks = args.tasks or list(EVAL_TASKS)
-    for name in (args.zsrm, args.student):
-        if name and not Path(name).is_dir():
-            raise FileNotFoundError(f"no model folder {name}: train it with zsrm finetune")
-    models, names = {}, {}
-    if args.zsrm:
-        models["zsrm"] = ZSRMReward(load_reward_backbone(args.zsrm))
-        names["zsrm"] = args.zsrm
-    if args.student:
-        models["student"] = ZSRMReward(load_reward_backbone(args.student), name="student")
-        names["student"] = args.student
+    names = {"zsrm": args.zsrm}
+    for item in args.compare or []:
+        key, sep, folder = item.partition("=")
+        if not sep or not key or not folder or key in ("zsrm", "base", "meta"):
+            raise ValueError(f"--compare takes NAME=FOLDER with a new NAME, got {item!r}")
+        names[key] = folder
+    for folder in names.values():
+        if not Path(folder).is_dir():
+            raise FileNotFoundError(f"no model folder {folder}: train it with zsrm finetune")
+    models = {key: ZSRMReward(load_reward_backbone(folder), name=key) for key, folder in names.items()}
     base_vlm = load_reward_backbone(args.base)
     models["base"] = ZSRMReward(base_vlm, name="base_binary")
     names["base"] = args.base
-    if not args.zsrm and not args.student:
-        raise ValueError("give --zsrm and/or --student model folders to evaluate against the base reward")
 
     frames = {t: rollout_frames(t, args.scripted_episodes, args.random_episodes, args.seed, args.every,
                                 progress=not args.quiet) for t in tasks}
@@ -77,8 +75,7 @@ def _cmd_eval_reward(args):
     if args.curves:
         for t in tasks:
             curve_models = {k: m for k, m in models.items() if k != "base"}
-            if args.zsrm:
-                curve_models["zsrm_raw"] = ZSRMReward(models["zsrm"].model, output="raw")
+            curve_models["zsrm_raw"] = ZSRMReward(models["zsrm"].model, output="raw")
             # The base reward as the paper plots it (Figure 5: the raw score), and binarised.
             curve_models["base"] = BaseReward(base_vlm, camera=frames[t].camera, mode=args.base_mode)
             curve_models["base_binary"] = models["base"]
@@ -142,8 +139,10 @@ def add_command(sub):
     p.set_defaults(func=_finetune_defaults)
 
     p = sub.add_parser("eval-reward", help="zsrm vs base reward against the oracle on held-out frames; curves")
-    p.add_argument("--zsrm", default="runs/zsrm/vlm", help="fine-tuned VLM folder ('' to skip)")
-    p.add_argument("--student", default="", help="student folder to evaluate as well")
+    p.add_argument("--zsrm", default="runs/zsrm/student",
+                   help="the full reward model reported as 'zsrm': a student or fine-tuned VLM folder")
+    p.add_argument("--compare", nargs="+", metavar="NAME=FOLDER",
+                   help="more models to report beside it, e.g. finetuned_vlm=runs/zsrm/vlm")
     p.add_argument("--base", default="scene", help="the base VLM (spec)")
     p.add_argument("--base-mode", dest="base_mode", default="dot", choices=("dot", "cosine"),
                    help="the base reward's raw score (default dot, paper 2.1)")
