@@ -1,4 +1,5 @@
 """The `zsrm` command line for the scenes, and the demo report."""
+import csv
 import json
 
 import numpy as np
@@ -35,7 +36,12 @@ def test_demo_writes_a_report(tmp_path):
     out = tmp_path / "report"
     assert main(["demo", "--out", str(out), "--episodes", "1"]) == 0
     for name in ("README.md", "scenes.png", "policies.csv", "policies.png", "random_episode_tabletop.gif",
-                 "base_reward_yellow_puck_blue.csv", "base_reward_yellow_block_red.png"):
+                 "reward_yellow_puck_blue.csv", "reward_yellow_block_red.png"):
         assert (out / name).exists(), name
+    with open(out / "reward_yellow_block_red.csv") as f:
+        curve = list(csv.DictReader(f))
+    assert {"base_reward", "zsrm_reward", "oracle"} <= set(curve[0])
+    assert {float(r["zsrm_reward"]) for r in curve} <= {0.0, 1.0}  # the binarised reward
+    assert "zsrm agrees with oracle" in (out / "README.md").read_text()
     rows = json.loads((out / "policies.json").read_text())
     assert {r["policy"] for r in rows} == {"random", "scripted"}

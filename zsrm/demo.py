@@ -1,8 +1,9 @@
 """``zsrm demo``: the offline main job. Writes a report folder with tables and plots.
 
 It shows the scenes, a random-policy episode per scene, how often the goal holds under a
-random policy and under the true-state scripted controller (the oracle's view), and the base
-reward of the shipped offline ``scene`` VLM along scripted trajectories (the paper's Figure 5).
+random policy and under the true-state scripted controller (the oracle's view), and along
+scripted trajectories (the paper's Figure 5) the base reward of the shipped offline ``scene`` VLM
+beside the binarised full reward of the shipped student reward model.
 """
 from __future__ import annotations
 
@@ -119,26 +120,35 @@ REWARD_CURVES = {  # goal -> the camera its relation is read from
 }
 
 
-def write_reward_curves(out: Path, vlm_spec: str = "scene") -> list[Path]:
-    """Base reward (paper 2.1) along scripted trajectories: CSV + PNG per goal."""
-    from zsrm.rewards import BaseReward, OracleReward
+def write_reward_curves(out: Path, vlm_spec: str = "scene", zsrm_spec: str = "student") -> tuple[list[Path], list[dict]]:
+    """Base reward (paper 2.1) and the binarised ZSRM reward (paper 2.2, the shipped student)
+    along scripted trajectories: CSV + PNG per goal, and how often each agrees with the oracle."""
+    from zsrm.reward_model.student import load_reward_backbone
+    from zsrm.rewards import BaseReward, OracleReward, ZSRMReward
     from zsrm.rewards.curve import plot_curve, record_trajectory, reward_curve, write_csv
     from zsrm.vlm import load_vlm
 
     vlm = load_vlm(vlm_spec)
-    paths = []
+    zsrm = ZSRMReward(load_reward_backbone(zsrm_spec))
+    paths, agreement = [], []
     for goal, camera in REWARD_CURVES.items():
         traj = record_trajectory(goal, cameras=(camera,), steps=40, seed=0)
-        rows = reward_curve(traj, {"base": BaseReward(vlm, camera=camera), "oracle": OracleReward()})
-        stem = out / ("base_reward_" + "_".join(goal.split()[1:3] + goal.split()[-2:-1]))
-        title = f"base reward ({vlm_spec} VLM) for {goal!r}, {camera} camera; green: oracle says the goal holds"
+        rows = reward_curve(traj, {"base": BaseReward(vlm, camera=camera), "zsrm": zsrm, "oracle": OracleReward()})
+        stem = out / ("reward_" + "_".join(goal.split()[1:3] + goal.split()[-2:-1]))
+        title = (f"base reward ({vlm_spec} VLM) and zsrm reward ({zsrm_spec}) for {goal!r}, {camera} camera; "
+                 "green: oracle says the goal holds")
         paths += [write_csv(rows, stem.with_suffix(".csv")), plot_curve(rows, traj, stem.with_suffix(".png"), camera, title)]
-    return paths
+        oracle = np.array([r["oracle"] for r in rows])
+        zsrm_says = np.array([r["zsrm_reward"] for r in rows])
+        agreement.append({"goal": goal, "frames": len(rows), "oracle_frames": int(oracle.sum()),
+                          "zsrm_frames": int(zsrm_says.sum()), "zsrm_agrees": float((zsrm_says == oracle).mean())})
+    return paths, agreement
 
 
 def run_demo(out: Path, episodes: int = 5) -> Path:
     out.mkdir(parents=True, exist_ok=True)
-    files = [write_scenes(out), *write_random_gifs(out), *write_reward_curves(out)]
+    curve_files, agreement = write_reward_curves(out)
+    files = [write_scenes(out), *write_random_gifs(out), *curve_files]
     rows = policy_table(episodes)
     with open(out / "policies.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
@@ -149,6 +159,10 @@ def run_demo(out: Path, episodes: int = 5) -> Path:
     lines = ["# zsrm demo report", "", "Written by `zsrm demo` (offline).", ""]
     lines += ["| task | policy | success rate | mean steps in goal |", "|---|---|---|---|"]
     lines += [f"| {r['task']} | {r['policy']} | {r['success_rate']:.2f} | {r['mean_steps_in_goal']:.1f} |" for r in rows]
+    lines += ["", "Binarised zsrm reward (shipped student) along one scripted episode, against the oracle:", "",
+              "| goal | frames | oracle: goal holds | zsrm reward 1 | zsrm agrees with oracle |", "|---|---|---|---|---|"]
+    lines += [f"| {a['goal']} | {a['frames']} | {a['oracle_frames']} | {a['zsrm_frames']} | {a['zsrm_agrees']:.2f} |"
+              for a in agreement]
     lines += ["", "Files:", *[f"- `{p.name}`" for p in files]]
     (out / "README.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines[4:4 + 2 + len(rows)]))

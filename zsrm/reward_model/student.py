@@ -30,6 +30,9 @@ from zsrm.reward_model.text import RoleTextFeatures
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel, pixels_from_images
 
 BACKEND = "zsrm-student"
+# The student trained by `make results` (results/reward_eval.json), shipped so that the ZSRM
+# reward works offline without training first: load it with the spec "student".
+SHIPPED_STUDENT_DIR = Path(__file__).resolve().parent / "weights" / "student"
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
 
@@ -180,8 +183,13 @@ def is_student_folder(spec) -> bool:
 
 
 def load_reward_backbone(spec: str | Path, device: str | torch.device = "cpu") -> VisionLanguageModel:
-    """A model folder written by ``zsrm finetune`` (fine-tuned VLM or student), or any
-    ``load_vlm`` spec (e.g. ``scene``, the base VLM)."""
+    """A model folder written by ``zsrm finetune`` (fine-tuned VLM or student), ``"student"``
+    (the shipped student), or any ``load_vlm`` spec (e.g. ``scene``, the base VLM)."""
+    if str(spec) == "student":
+        if not (SHIPPED_STUDENT_DIR / CONFIG_FILE).is_file():
+            raise FileNotFoundError(f"the shipped student is missing from {SHIPPED_STUDENT_DIR}; reinstall zsrm "
+                                    "or train one with zsrm finetune --student")
+        spec = SHIPPED_STUDENT_DIR
     backend = folder_backend(spec)
     if backend == BACKEND:
         return StudentRewardNet.from_folder(spec, device)

@@ -1,6 +1,6 @@
 """Rewards from goal sentences and images, and the wrappers that give them to RL agents.
 
->>> from zsrm.rewards import BaseReward, OracleReward, ZeroShotReward, VecZeroShotReward
+>>> from zsrm.rewards import BaseReward, OracleReward, ZSRMReward, ZeroShotReward, VecZeroShotReward
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ _EXPORTS = {
     "BaseReward": "zsrm.rewards.base",
     "projection_reward": "zsrm.rewards.base",
     "OracleReward": "zsrm.rewards.oracle",
+    "ZSRMReward": "zsrm.rewards.zsrm",
     "ZeroShotReward": "zsrm.rewards.wrappers",
     "VecZeroShotReward": "zsrm.rewards.wrappers",
     "reward_curve": "zsrm.rewards.curve",
