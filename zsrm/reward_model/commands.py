@@ -83,11 +83,12 @@ def _cmd_eval_reward(args):
                                                  seed=args.seed + 999)
             print(f"wrote {csv_path} and {png_path}")
 
-    header = f"{'task':<12}" + "".join(f"{k + ' F1':>14}" for k in models) + "".join(f"{k + ' AUROC':>14}" for k in models)
-    print(header)
+    width = max(14, *(len(k) + 8 for k in models))
+    header = f"{'task':<12}" + "".join(f"{k + ' F1':>{width}}" for k in models)
+    print(header + "".join(f"{k + ' AUROC':>{width}}" for k in models))
     for t in tasks:
-        row = f"{t:<12}" + "".join(f"{results[k][t]['f1']:>14.3f}" for k in models)
-        row += "".join(f"{results[k][t]['auroc']:>14.3f}" for k in models)
+        row = f"{t:<12}" + "".join(f"{results[k][t]['f1']:>{width}.3f}" for k in models)
+        row += "".join(f"{results[k][t]['auroc']:>{width}.3f}" for k in models)
         print(row)
     print(f"wrote {out}")
     return 0 if np.isfinite([results[k][t]["f1"] for k in models for t in tasks]).all() else 1
