@@ -2,7 +2,7 @@
 
 Same as ``zsrm collect`` + ``zsrm label`` with the settings the label command does not expose:
 
-* both scenes (tabletop blocks and pushing pucks: push_close is a puck task), 6,000 images,
+* both scenes (tabletop blocks and pushing pucks: push_close is a puck task), 16,000 images,
   a quarter of the episodes starting with two objects side by side and some stacked
   (``CollectConfig.p_side``/``p_stack``): random actions alone rarely bring two pucks together;
 * Grad-CAM cell centres on the ``grid``; the tilted camera is read on the table in metres
@@ -31,7 +31,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="data/zsrm/explore")
-    p.add_argument("--images", type=int, default=6000)
+    p.add_argument("--images", type=int, default=16000)
     p.add_argument("--shard-size", type=int, default=250)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--labels", default="labels", help="labels folder inside OUT")

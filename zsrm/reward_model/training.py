@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import shutil
 import time
 from dataclasses import dataclass
@@ -37,6 +36,7 @@ from zsrm.reward_model.negatives import candidate_texts
 from zsrm.reward_model.pairs import CaptionedImages, caption_relation
 from zsrm.vlm.base import VisionLanguageModel
 from zsrm.vlm.losses import multi_positive_contrastive_loss
+from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
 
 STUDENT_PRESETS = {
     "default": {},
@@ -114,19 +114,12 @@ def initial_model(cfg: FinetuneConfig) -> VisionLanguageModel:
 
 
 def _optimizer(model: nn.Module, cfg: FinetuneConfig) -> torch.optim.Optimizer:
-    params = [p for p in model.parameters() if p.requires_grad]
-    decay = [p for p in params if p.ndim >= 2]
-    no_decay = [p for p in params if p.ndim < 2]
-    return torch.optim.AdamW([{"params": decay, "weight_decay": cfg.weight_decay},
-                              {"params": no_decay, "weight_decay": 0.0}], lr=cfg.lr)
+    return adamw(model, cfg.lr, cfg.weight_decay)
 
 
 def learning_rate(step: int, cfg: FinetuneConfig) -> float:
     """Linear warmup, then cosine decay to zero."""
-    if step < cfg.warmup_steps:
-        return cfg.lr * (step + 1) / cfg.warmup_steps
-    progress = (step - cfg.warmup_steps) / max(1, cfg.steps - cfg.warmup_steps)
-    return 0.5 * cfg.lr * (1 + math.cos(math.pi * min(1.0, progress)))
+    return warmup_cosine(step, cfg.lr, cfg.warmup_steps, cfg.steps)
 
 
 # --- loss --------------------------------------------------------------------------------------
@@ -225,30 +218,16 @@ def _save_checkpoint(folder: Path, model: nn.Module, opt: torch.optim.Optimizer,
                      log: list[dict]):
     from safetensors.torch import save_model
 
-    tmp = folder.with_name(folder.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    save_model(model, str(tmp / "weights.safetensors"))
-    torch.save(opt.state_dict(), tmp / "optimizer.pt")  # tensors and numbers only: loads with weights_only=True
-    (tmp / "state.json").write_text(json.dumps({"step": step, "config": cfg.identity(), "log": log}) + "\n")
-    old = folder.with_name(folder.name + ".old")
-    if folder.exists():
-        folder.rename(old)
-    tmp.rename(folder)
-    shutil.rmtree(old, ignore_errors=True)
+    save_checkpoint(folder, lambda tmp: save_model(model, str(tmp / "weights.safetensors")), opt,
+                    {"step": step, "config": cfg.identity(), "log": log})
 
 
 def _load_checkpoint(folder: Path, model: nn.Module, opt: torch.optim.Optimizer, cfg: FinetuneConfig):
     from safetensors.torch import load_model
 
-    state = json.loads((folder / "state.json").read_text())
-    if state["config"] != cfg.identity():
-        diff = {k: (state["config"].get(k), v) for k, v in cfg.identity().items() if state["config"].get(k) != v}
-        raise ValueError(f"the checkpoint in {folder} was made with other settings "
-                         f"({'; '.join(f'{k}: {a} there, {b} now' for k, (a, b) in diff.items())}); "
-                         "pass --fresh to start over or use another --workdir")
+    state = read_checkpoint_state(folder, cfg.identity())
     load_model(model, str(folder / "weights.safetensors"), strict=True)
-    opt.load_state_dict(torch.load(folder / "optimizer.pt", weights_only=True))
+    load_optimizer(folder, opt)
     return state["step"], state["log"]
 
 

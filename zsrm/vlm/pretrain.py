@@ -26,6 +26,7 @@ from torch import nn
 from zsrm.tasks.language import COLOURS
 from zsrm.vlm.factory import SHIPPED_SCENE_DIR
 from zsrm.vlm.losses import multi_positive_contrastive_loss
+from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
 from zsrm.vlm.presence import SCENES, SHAPES, all_presence_captions, presence_caption, render_presence_scenes, \
     visible_colours
 from zsrm.vlm.scene import SceneVLM, create_scene_vlm
@@ -98,18 +99,12 @@ def _take_scenes(data: dict, end: int) -> dict:
 
 # --- training ----------------------------------------------------------------------------------
 def _optimizer(model: SceneVLM, cfg: PretrainConfig) -> torch.optim.Optimizer:
-    decay = [p for p in model.parameters() if p.requires_grad and p.ndim >= 2]
-    no_decay = [p for p in model.parameters() if p.requires_grad and p.ndim < 2]
-    return torch.optim.AdamW([{"params": decay, "weight_decay": cfg.weight_decay},
-                              {"params": no_decay, "weight_decay": 0.0}], lr=cfg.lr)
+    return adamw(model, cfg.lr, cfg.weight_decay)
 
 
 def learning_rate(step: int, cfg: PretrainConfig) -> float:
     """Linear warmup, then cosine decay to zero."""
-    if step < cfg.warmup_steps:
-        return cfg.lr * (step + 1) / cfg.warmup_steps
-    progress = (step - cfg.warmup_steps) / max(1, cfg.steps - cfg.warmup_steps)
-    return 0.5 * cfg.lr * (1 + math.cos(math.pi * min(1.0, progress)))
+    return warmup_cosine(step, cfg.lr, cfg.warmup_steps, cfg.steps)
 
 
 def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfig):
@@ -134,28 +129,14 @@ def contrastive_step_loss(model: SceneVLM, images: np.ndarray, captions: list[st
 
 def _save_checkpoint(folder: Path, model: SceneVLM, opt: torch.optim.Optimizer, step: int, cfg: PretrainConfig,
                      log: list[dict]):
-    tmp = folder.with_name(folder.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    model.save(tmp)
-    torch.save(opt.state_dict(), tmp / "optimizer.pt")  # tensors and numbers only: loads with weights_only=True
-    (tmp / "state.json").write_text(json.dumps({"step": step, "config": cfg.identity(), "log": log}) + "\n")
-    old = folder.with_name(folder.name + ".old")
-    if folder.exists():
-        folder.rename(old)
-    tmp.rename(folder)
-    shutil.rmtree(old, ignore_errors=True)
+    save_checkpoint(folder, model.save, opt, {"step": step, "config": cfg.identity(), "log": log})
 
 
 def _load_checkpoint(folder: Path, cfg: PretrainConfig):
-    state = json.loads((folder / "state.json").read_text())
-    if state["config"] != cfg.identity():
-        diff = {k: (state["config"].get(k), v) for k, v in cfg.identity().items() if state["config"].get(k) != v}
-        raise ValueError(f"the checkpoint in {folder} was made with other settings "
-                         f"({', '.join(f'{k}: {a} there, {b} now' for k, (a, b) in diff.items())}); "
-                         "pass --fresh to start over or use another --workdir")
+    state = read_checkpoint_state(folder, cfg.identity())
     model = SceneVLM.from_folder(folder)
     opt = _optimizer(model, cfg)
-    opt.load_state_dict(torch.load(folder / "optimizer.pt", weights_only=True))
+    load_optimizer(folder, opt)
     return model, opt, state["step"], state["log"]
 
 
