@@ -139,3 +139,16 @@ def test_plugs_into_the_gymnasium_wrapper_and_the_reward_curve():
     env.close()
     rows = reward_curve(record_trajectory(goal, cameras=("tilted",), steps=3), [reward])
     assert len(rows) == 4 and all(row["zsrm_reward"] in (0.0, 1.0) for row in rows)
+
+
+@pytest.mark.parametrize("goal", ["a yellow block on top of a red block", "a yellow puck close to a blue puck"])
+def test_the_shipped_student_rewards_the_end_of_a_scripted_episode_and_not_its_start(goal):
+    from zsrm.reward_model import load_reward_backbone
+    from zsrm.rewards.curve import record_trajectory
+
+    reward = ZSRMReward(load_reward_backbone("student"))
+    camera = reward.goal_camera(goal)
+    traj = record_trajectory(goal, cameras=(camera,), steps=40, seed=0)
+    assert not traj.infos[0]["is_success"] and traj.infos[-1]["is_success"]  # the oracle, for the check only
+    frames = traj.observations[camera][[0, -1]]
+    assert reward({camera: frames}, goal).tolist() == [0.0, 1.0]
