@@ -108,7 +108,8 @@ def _training_summary(folder: str) -> dict | None:
 
 def add_command(sub):
     p = sub.add_parser("finetune", help="train the full reward model on labelled pairs (CLIP-style), or the student")
-    p.add_argument("--data", default="data/explore", help="dataset folder of zsrm collect + zsrm label")
+    p.add_argument("--data", default="data/zsrm/explore",
+                   help="dataset folder of zsrm collect + zsrm label, or of benchmarks/reward_data.py (the default)")
     p.add_argument("--labels", default="labels", help="labels folder inside the dataset (Grad-CAM captions)")
     p.add_argument("--vlm", default="scene",
                    help="VLM to start from (scene, open_clip:RN50, a folder); with --student, the VLM whose "

@@ -46,7 +46,7 @@ STUDENT_PRESETS = {
 
 @dataclass
 class FinetuneConfig:
-    data: str = "data/explore"  # a folder written by zsrm collect + zsrm label
+    data: str = "data/zsrm/explore"  # written by benchmarks/reward_data.py, or zsrm collect + zsrm label
     labels: str = "labels"  # the labels folder inside it (Grad-CAM captions are read, nothing else)
     out: str = "runs/zsrm/vlm"  # where the trained model is saved
     workdir: str = ""  # checkpoint and log; default OUT.work
