@@ -27,10 +27,10 @@ results: setup
 	$(VENV)/bin/zsrm label data/grounding --vlm scene
 	$(VENV)/bin/zsrm eval-grounding data/grounding --out results/grounding.json --figure results/figure3.png
 	$(PY) benchmarks/gradcam_speed.py --out results/gradcam_speed.json
-	$(PY) benchmarks/reward_data.py --out data/zsrm/explore
+	$(VENV)/bin/zsrm reward-data --out data/zsrm/explore
 	$(VENV)/bin/zsrm finetune --student --data data/zsrm/explore --steps 4000 --out runs/zsrm/student
 	cp runs/zsrm/student/config.json runs/zsrm/student/model.safetensors runs/zsrm/student/training.json \
-		zsrm/reward_model/weights/student/
+		zsrm/fullmodel/weights/student/
 	$(VENV)/bin/zsrm finetune --data data/zsrm/explore --out runs/zsrm/vlm
 	$(VENV)/bin/zsrm eval-reward --zsrm runs/zsrm/vlm --compare student=runs/zsrm/student --out results/reward_eval.json
 	$(PY) benchmarks/reward_speed.py --vlm runs/zsrm/vlm --student runs/zsrm/student --out results/reward_speed.json

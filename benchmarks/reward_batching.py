@@ -28,7 +28,7 @@ import numpy as np
 import torch
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from zsrm.envs.commands import make_env
+from zsrm.envs.rollout import make_env
 from zsrm.rewards import BaseReward, VecZeroShotReward, ZeroShotReward
 from zsrm.vlm import load_vlm
 

@@ -1,6 +1,6 @@
 """Rewards per second on 64 frames: the student network vs the fine-tuned VLM, in one run.
 
-Both compute the same thing, the binarised ZSRM reward (:class:`zsrm.rewards.zsrm.ZSRMReward`)
+Both compute the same thing, the binarised ZSRM reward (:class:`zsrm.rewards.binarised.ZSRMReward`)
 of "a yellow block on top of a red block" for a batch of 64 real rendered front-camera frames
 (64 px), with the goal and negative texts embedded once beforehand. The fine-tuned VLM is the
 simple way (the model the rewards come from); the student is the small network for the RL
@@ -32,7 +32,7 @@ TASK = "stack"
 
 def frames(n: int, seed: int = 0) -> np.ndarray:
     """n front frames of the stack scene, half from the scripted controller (goal reached), half random."""
-    from zsrm.reward_model.evaluate import rollout_frames
+    from zsrm.evaluation.reward_quality import rollout_frames
 
     f = rollout_frames(TASK, scripted_episodes=2, random_episodes=2, seed=seed, every=1, progress=False)
     rng = np.random.default_rng(seed)
@@ -48,8 +48,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="results/reward_speed.json")
     args = p.parse_args(argv)
 
-    from zsrm.reward_model.student import load_reward_backbone
-    from zsrm.rewards.zsrm import ZSRMReward
+    from zsrm.fullmodel import load_reward_backbone
+    from zsrm.rewards.binarised import ZSRMReward
     from zsrm.tasks.catalogue import SINGLE_TASKS
 
     for path in (args.vlm, args.student):

@@ -10,7 +10,7 @@ from zsrm.data.collect import CollectConfig, collect
 from zsrm.data.dataset import ExplorationData
 from zsrm.data.shards import load_npz
 from zsrm.grounding.annotate import LabelConfig, label_dataset
-from zsrm.grounding.testing import ColourVLM
+from zsrm.testing import ColourVLM
 
 CFG = dict(images=6, shard_size=2, episode_steps=4, record_every=2, image_size=32)
 

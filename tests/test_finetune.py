@@ -1,14 +1,14 @@
-"""Contrastive fine-tuning of the full reward model (zsrm/reward_model/finetune.py)."""
+"""Contrastive fine-tuning of the full reward model (zsrm/fullmodel/training.py)."""
 import json
 
 import numpy as np
 import pytest
 import torch
 
-from zsrm.reward_model import training as ft
-from zsrm.reward_model.training import FinetuneConfig, batch_loss, finetune, reward_logits, shift_images
-from zsrm.reward_model.negatives import candidate_texts
-from zsrm.reward_model.testing import synthetic_pairs
+from zsrm.fullmodel import training as ft
+from zsrm.fullmodel.training import FinetuneConfig, batch_loss, finetune, reward_logits, shift_images
+from zsrm.tasks.negatives import candidate_texts
+from zsrm.testing import synthetic_pairs
 from zsrm.vlm.base import VisionLanguageModel
 from zsrm.vlm.losses import multi_positive_contrastive_loss
 
@@ -156,7 +156,7 @@ def test_finetune_resumes_after_a_kill_to_the_same_weights(tmp_path, monkeypatch
     # The weights changed from the initial model, and the saved folder loads back.
     init = _weights(tiny_scene_vlm())
     assert any(not torch.equal(init[k], a[k]) for k in a)
-    from zsrm.reward_model.student import load_reward_backbone
+    from zsrm.fullmodel import load_reward_backbone
 
     reloaded = load_reward_backbone(cfg.out)
     x = data.pair_images(np.arange(4))
@@ -194,7 +194,7 @@ def test_finetunes_an_open_clip_model_too(tmp_path):
     after = _weights(model)
     assert any(not torch.equal(before[k], after[k]) for k in before if "visual" in k)
     assert any(not torch.equal(before[k], after[k]) for k in before if "transformer" in k)
-    from zsrm.reward_model.student import load_reward_backbone
+    from zsrm.fullmodel import load_reward_backbone
 
     reloaded = load_reward_backbone(str(tmp_path / "oc" / "model"))
     assert reloaded.backend == "open_clip"

@@ -1,13 +1,13 @@
-"""The image and text adapters added to a VLM for fine-tuning (zsrm/reward_model/adapted.py)."""
+"""The image and text adapters added to a VLM for fine-tuning (zsrm/fullmodel/adapted.py)."""
 import json
 
 import numpy as np
 import pytest
 import torch
 
-from zsrm.reward_model.adapted import AdaptedVLM
-from zsrm.reward_model.student import load_reward_backbone
-from zsrm.reward_model.training import FinetuneConfig, initial_model
+from zsrm.fullmodel.adapted import AdaptedVLM
+from zsrm.fullmodel import load_reward_backbone
+from zsrm.fullmodel.training import FinetuneConfig, initial_model
 from zsrm.vlm import create_scene_vlm
 
 
@@ -42,7 +42,7 @@ def test_starts_as_the_vlm_and_reads_positions_once_trained(tmp_path):
 
 
 def test_text_adapter_separates_what_the_text_tower_blurs():
-    from zsrm.reward_model.negatives import candidate_texts
+    from zsrm.tasks.negatives import candidate_texts
 
     vlm = tiny()
     model = adapted(vlm, grid=0)

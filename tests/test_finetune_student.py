@@ -1,14 +1,15 @@
-"""The student reward network (zsrm/reward_model/student.py), trained from scratch."""
+"""The student reward network (zsrm/fullmodel/student.py), trained from scratch."""
 import json
 
 import numpy as np
 import pytest
 import torch
 
-from zsrm.reward_model.student import StudentConfig, StudentRewardNet, is_student_folder, load_reward_backbone
-from zsrm.reward_model.testing import TaskTextVLM, synthetic_pairs
-from zsrm.reward_model.training import FinetuneConfig, evaluate_pairs, finetune
-from zsrm.rewards.zsrm import ZSRMReward
+from zsrm.fullmodel import load_reward_backbone
+from zsrm.fullmodel.student import StudentConfig, StudentRewardNet, is_student_folder
+from zsrm.testing import TaskTextVLM, synthetic_pairs
+from zsrm.fullmodel.training import FinetuneConfig, evaluate_pairs, finetune
+from zsrm.rewards.binarised import ZSRMReward
 
 
 def small_student(text_vlm=None, spec="testing"):

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from zsrm.grounding.gradcam import GradCAM, grid_centres, locate
-from zsrm.grounding.testing import ColourVLM
+from zsrm.testing import ColourVLM
 
 PHRASES = ["red block", "yellow block", "blue block"]
 

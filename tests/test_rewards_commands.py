@@ -8,7 +8,7 @@ from PIL import Image
 
 from zsrm.cli import main
 from zsrm.rewards import BaseReward
-from zsrm.rewards.commands import read_image, score_files
+from zsrm.rewards.files import read_image, score_files
 
 GOAL = "a yellow puck close to a blue puck"
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from zsrm.rewards import BaseReward, OracleReward
-from zsrm.rewards.curve import plot_curve, record_trajectory, reward_curve, summarise, write_csv
+from zsrm.evaluation.curves import plot_curve, record_trajectory, reward_curve, summarise, write_csv
 
 GOAL = "a yellow puck close to a blue puck"
 

@@ -5,8 +5,7 @@ import importlib
 import pytest
 
 # base.py's example loads the shipped scene VLM (zsrm/vlm/weights/scene).
-MODULES = ["zsrm.rewards.reward_model", "zsrm.rewards.base", "zsrm.rewards.oracle", "zsrm.rewards.wrappers",
-           "zsrm.rewards.curve"]
+MODULES = ["zsrm.rewards.binarised", "zsrm.rewards.base", "zsrm.rewards.oracle", "zsrm.rewards.wrappers"]
 
 
 @pytest.mark.parametrize("name", MODULES)

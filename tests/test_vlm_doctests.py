@@ -4,7 +4,8 @@ import importlib
 
 import pytest
 
-MODULES = ["zsrm.vlm.base", "zsrm.vlm.losses", "zsrm.vlm.presence", "zsrm.vlm.scene"]
+MODULES = ["zsrm.vlm.base", "zsrm.vlm.losses", "zsrm.vlm.presence", "zsrm.vlm.scene", "zsrm.vlm.registry",
+           "zsrm.vlm.text_cache"]
 
 
 @pytest.mark.parametrize("name", MODULES)

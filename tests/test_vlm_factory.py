@@ -1,15 +1,15 @@
-"""load_vlm specs (zsrm/vlm/factory.py) and the torchvision import guard (zsrm/vlm/compat.py)."""
+"""load_vlm specs (zsrm/vlm/factory.py, zsrm/vlm/registry.py) and the torchvision import guard (zsrm/vlm/compat.py)."""
 import json
 
 import pytest
 
-import zsrm.vlm.factory as factory
 from zsrm.cli import main
-from zsrm.vlm import SceneVLM, create_scene_vlm, load_vlm
+from zsrm.vlm import SHIPPED_SCENE_DIR, SceneVLM, create_scene_vlm, load_vlm
+from zsrm.vlm.registry import SHIPPED
 
 
 def test_shipped_scene_model_missing_says_how_to_build_it(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(factory, "SHIPPED_SCENE_DIR", tmp_path / "nowhere")
+    monkeypatch.setitem(SHIPPED, "scene", tmp_path / "nowhere")
     with pytest.raises(FileNotFoundError, match="zsrm pretrain-vlm"):
         load_vlm("scene")
     assert main(["eval-vlm", "--vlm", "scene", "--quiet"]) == 2
@@ -39,7 +39,7 @@ def test_broken_folders(tmp_path):
         load_vlm(str(tmp_path / "empty"))
     (tmp_path / "odd").mkdir()
     (tmp_path / "odd" / "config.json").write_text(json.dumps({"backend": "blip"}))
-    with pytest.raises(ValueError, match="unknown backend 'blip'"):
+    with pytest.raises(ValueError, match="unknown model kind 'blip'"):
         load_vlm(str(tmp_path / "odd"))
     (tmp_path / "noweights").mkdir()
     create_scene_vlm("tiny").save(tmp_path / "noweights")
@@ -49,7 +49,7 @@ def test_broken_folders(tmp_path):
 
 
 def test_shipped_scene_model_loads_when_present():
-    if not (factory.SHIPPED_SCENE_DIR / "model.safetensors").exists():
+    if not (SHIPPED_SCENE_DIR / "model.safetensors").exists():
         pytest.fail("the shipped scene VLM is missing: run `zsrm pretrain-vlm`")
     vlm = load_vlm("scene")
     assert vlm.config.image_size == 64 and vlm.gradcam_layer == "visual.final"

@@ -1,12 +1,12 @@
-"""Presence renders and captions (zsrm/vlm/presence.py): what the scene VLM learns from."""
+"""Presence renders (zsrm/data/renders.py) and captions (zsrm/vlm/presence.py): what the scene VLM learns from."""
 import re
 
 import numpy as np
 import pytest
 
 from zsrm.tasks.language import COLOURS, RELATION_WORDS
-from zsrm.vlm.presence import (all_presence_captions, join_phrases, presence_caption, probe_text,
-                               render_presence_scenes, scene_plan, visible_colours)
+from zsrm.data.renders import render_presence_scenes, scene_plan
+from zsrm.vlm.presence import all_presence_captions, join_phrases, presence_caption, probe_text, visible_colours
 
 RELATION_WORDINGS = sorted({w for words in RELATION_WORDS.values() for w in words}, key=len, reverse=True)
 

@@ -1,15 +1,20 @@
-"""Pretraining (zsrm/vlm/pretrain.py), its resume after a kill, and the presence evaluation."""
+"""Pretraining (zsrm/vlm/pretrain.py on renders of zsrm/data/renders.py), its resume after a kill,
+and the presence evaluation."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
+import zsrm.data.renders as renders_mod
 import zsrm.vlm.pretrain as pretrain_mod
 from zsrm.cli import main
+from zsrm.data.renders import load_renders
+from zsrm.pipeline.build import pretrain_scene_vlm
 from zsrm.vlm import load_vlm
-from zsrm.vlm.evaluate import presence_eval, write_presence_results
-from zsrm.vlm.pretrain import PretrainConfig, learning_rate, make_batch, pretrain
+from zsrm.evaluation.presence import presence_eval, write_presence_results
+from zsrm.vlm.pretrain import PretrainConfig, learning_rate, make_batch
 
 TINY = dict(arch="tiny", scenes=4, shard_size=2, steps=6, batch_size=8, checkpoint_every=2, warmup_steps=2)
 
@@ -53,13 +58,13 @@ def test_resume_after_a_kill_matches_an_uninterrupted_run_without_re_rendering(t
 
     monkeypatch.setattr(pretrain_mod, "make_batch", dies_at_step_3)
     with pytest.raises(KeyboardInterrupt):
-        pretrain(cfg, progress=False)
+        pretrain_scene_vlm(cfg, progress=False)
     assert json.loads((tmp_path / "work" / "checkpoint" / "state.json").read_text())["step"] == 2
     assert not (tmp_path / "out").exists()
 
     monkeypatch.setattr(pretrain_mod, "make_batch", real_make_batch)
-    monkeypatch.setattr(pretrain_mod, "render_presence_scenes", lambda *a, **k: pytest.fail("re-rendered"))
-    resumed = pretrain(cfg, progress=False)
+    monkeypatch.setattr(renders_mod, "render_presence_scenes", lambda *a, **k: pytest.fail("re-rendered"))
+    resumed = pretrain_scene_vlm(cfg, progress=False)
     reference = load_vlm(str(trained / "out"))
     for (name, a), (_, b) in zip(resumed.state_dict().items(), reference.state_dict().items()):
         assert torch.allclose(a, b, atol=1e-6), name
@@ -71,12 +76,12 @@ def test_changed_settings_refuse_to_resume(trained, tmp_path):
     shutil.copytree(trained / "work", tmp_path / "work")
     cfg = PretrainConfig(out=str(tmp_path / "out"), workdir=str(tmp_path / "work"), **{**TINY, "lr": 1e-3})
     with pytest.raises(ValueError, match="other settings.*lr"):
-        pretrain(cfg, progress=False)
+        pretrain_scene_vlm(cfg, progress=False)
 
 
 def test_batches_are_a_function_of_seed_and_step(trained):
     cfg = PretrainConfig(workdir=str(trained / "work"), **TINY)
-    data = pretrain_mod.load_renders(cfg, progress=False)
+    data = load_renders(Path(cfg.workdir) / "renders", cfg.scenes, cfg.shard_size, cfg.seed, progress=False)
     rows = np.arange(len(data["images"]))
     a, b = make_batch(data, rows, 5, cfg), make_batch(data, rows, 5, cfg)
     assert np.array_equal(a[0], b[0]) and a[1] == b[1]

@@ -1,4 +1,4 @@
-"""Evaluation of the rewards against the oracle (zsrm/reward_model/evaluate.py) and the commands."""
+"""Evaluation of the rewards against the oracle (zsrm/evaluation/reward_quality.py, metrics.py) and the commands."""
 import json
 import os
 import subprocess
@@ -7,9 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from zsrm.reward_model.evaluate import (auroc, best_threshold_f1, binary_metrics, evaluate_rewards, rollout_frames,
-                                        task_camera)
-from zsrm.rewards.zsrm import ZSRMReward
+from zsrm.evaluation.metrics import auroc, best_threshold_f1, binary_metrics
+from zsrm.evaluation.reward_quality import evaluate_rewards, rollout_frames, task_camera
+from zsrm.rewards.binarised import ZSRMReward
 
 
 def test_binary_metrics_on_known_counts():
@@ -43,7 +43,7 @@ def test_rollout_frames_hold_reached_and_unreached_goals():
 
 
 def test_evaluate_rewards_scores_every_model_and_task():
-    from zsrm.grounding.testing import ColourVLM
+    from zsrm.testing import ColourVLM
 
     frames = {"push_close": rollout_frames("push_close", 1, 1, seed=3, every=10, progress=False)}
     out = evaluate_rewards({"a": ZSRMReward(ColourVLM(32))}, frames,
@@ -62,7 +62,7 @@ def _zsrm(*args):
 
 def test_cli_missing_inputs_are_one_line_errors(tmp_path):
     proc = _zsrm("finetune", "--data", str(tmp_path / "nothing"))
-    assert proc.returncode == 2 and "run zsrm collect and zsrm label first" in proc.stderr
+    assert proc.returncode == 2 and "run zsrm reward-data, or zsrm collect and zsrm label, first" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
     proc = _zsrm("eval-reward", "--zsrm", str(tmp_path / "nope"))
     assert proc.returncode == 2 and "train it with zsrm finetune" in proc.stderr

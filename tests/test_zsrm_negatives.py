@@ -1,8 +1,8 @@
-"""Negative texts of the binarised reward (zsrm/reward_model/negatives.py)."""
+"""Negative texts of the binarised reward (zsrm/tasks/negatives.py)."""
 import numpy as np
 import pytest
 
-from zsrm.reward_model.negatives import (IMPLIED_BY, SYMMETRIC, candidate_texts, negative_tasks, negative_texts,
+from zsrm.tasks.negatives import (IMPLIED_BY, SYMMETRIC, candidate_texts, negative_tasks, negative_texts,
                                          swapped_tasks)
 from zsrm.tasks.language import GoalError, Task, parse_goal
 from zsrm.tasks.relations import RELATIONS, WORLD_THRESHOLDS, holds_in_world

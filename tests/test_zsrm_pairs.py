@@ -1,11 +1,11 @@
-"""Training pairs of the full reward model (zsrm/reward_model/pairs.py)."""
+"""Training pairs of the full reward model (zsrm/fullmodel/pairs.py)."""
 import json
 
 import numpy as np
 import pytest
 
-from zsrm.reward_model.pairs import CaptionedImages, caption_camera, caption_relation, complement_captions
-from zsrm.reward_model.testing import synthetic_pairs
+from zsrm.fullmodel.pairs import CaptionedImages, caption_camera, caption_relation, complement_captions
+from zsrm.testing import synthetic_pairs
 
 FRONT = "a red block on the left of a blue block"
 LEFT = "a red block behind a blue block"
@@ -65,7 +65,7 @@ def test_bad_inputs_are_clear_errors():
 def test_reads_a_labelled_dataset_and_only_its_gradcam_captions(tmp_path):
     from zsrm.data.collect import CollectConfig, collect
     from zsrm.grounding.annotate import LabelConfig, label_dataset
-    from zsrm.grounding.testing import ColourVLM
+    from zsrm.testing import ColourVLM
 
     folder = tmp_path / "explore"
     collect(CollectConfig(images=8, shard_size=4, episode_steps=4, record_every=2), folder, progress=False)

@@ -1,10 +1,10 @@
-"""The ZSRM reward (zsrm/rewards/zsrm.py) on hand-made embeddings, and in the rewards' wrappers."""
+"""The ZSRM reward (zsrm/rewards/binarised.py) on hand-made embeddings, and in the rewards' wrappers."""
 import numpy as np
 import pytest
 import torch
 
-from zsrm.reward_model.negatives import candidate_texts
-from zsrm.rewards.zsrm import ZSRMReward
+from zsrm.tasks.negatives import candidate_texts
+from zsrm.rewards.binarised import ZSRMReward
 from zsrm.vlm.base import VisionLanguageModel
 
 GOAL = "a yellow block on top of a red block"
@@ -126,9 +126,9 @@ def test_plugs_into_the_gymnasium_wrapper_and_the_reward_curve():
     import gymnasium as gym
 
     import zsrm.envs  # noqa: F401
-    from zsrm.grounding.testing import ColourVLM
+    from zsrm.testing import ColourVLM
     from zsrm.rewards import ZeroShotReward
-    from zsrm.rewards.curve import record_trajectory, reward_curve
+    from zsrm.evaluation.curves import record_trajectory, reward_curve
 
     goal = "a blue puck close to a yellow puck"
     reward = ZSRMReward(ColourVLM(image_size=32))
@@ -143,8 +143,8 @@ def test_plugs_into_the_gymnasium_wrapper_and_the_reward_curve():
 
 @pytest.mark.parametrize("goal", ["a yellow block on top of a red block", "a yellow puck close to a blue puck"])
 def test_the_shipped_student_rewards_the_end_of_a_scripted_episode_and_not_its_start(goal):
-    from zsrm.reward_model import load_reward_backbone
-    from zsrm.rewards.curve import record_trajectory
+    from zsrm.fullmodel import load_reward_backbone
+    from zsrm.evaluation.curves import record_trajectory
 
     reward = ZSRMReward(load_reward_backbone("student"))
     camera = reward.goal_camera(goal)

@@ -18,12 +18,10 @@ import numpy as np
 
 from zsrm.data.dataset import ExplorationData
 from zsrm.data.shards import ShardFolder, save_npz
-from zsrm.tasks.catalogue import PUSHING_ID, TABLETOP_ID
+from zsrm.tasks.catalogue import SCENE_IDS
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import CAMERAS
 
-SCENES = {"tabletop": TABLETOP_ID, "pushing": PUSHING_ID}
-SHAPE_OF = {"tabletop": "block", "pushing": "puck"}
 
 
 @dataclass
@@ -31,13 +29,13 @@ class CollectConfig:
     """Options of ``zsrm collect``. The data depend on these and nothing else."""
 
     images: int = 1000  # images (per camera) in all
-    shard_size: int = 100
-    seed: int = 0
-    scenes: tuple[str, ...] = ("tabletop",)
-    cameras: tuple[str, ...] = CAMERAS
-    image_size: int = 64
-    min_objects: int = 2
-    max_objects: int = 4
+    shard_size: int = 100  # images per shard (the unit a killed run resumes from)
+    seed: int = 0  # seed of the whole dataset; shard i uses (seed, i)
+    scenes: tuple[str, ...] = ("tabletop",)  # scenes to explore: tabletop, pushing
+    cameras: tuple[str, ...] = CAMERAS  # cameras to render
+    image_size: int = 64  # image side in pixels
+    min_objects: int = 2  # fewest objects in a scene
+    max_objects: int = 4  # most objects in a scene
     exclude: tuple[str, ...] = ()  # colours never to place (the multi-task data never sees blue)
     episode_steps: int = 20  # random actions per episode
     record_every: int = 5  # keep the images of every this many steps, from the reset on
@@ -55,8 +53,8 @@ class CollectConfig:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {getattr(self, name)!r}")
         self.scenes, self.cameras, self.exclude = tuple(self.scenes), tuple(self.cameras), tuple(self.exclude)
         for s in self.scenes:
-            if s not in SCENES:
-                raise ValueError(f"unknown scene {s!r}; known scenes: {', '.join(SCENES)}")
+            if s not in SCENE_IDS:
+                raise ValueError(f"unknown scene {s!r}; known scenes: {', '.join(SCENE_IDS)}")
         if not self.scenes:
             raise ValueError("give at least one scene")
         for c in self.cameras:
@@ -93,7 +91,7 @@ class _Envs:
 
             import zsrm.envs  # noqa: F401  (registers the ids)
 
-            self.envs[key] = gym.make(SCENES[scene], task=None, objects=colours, cameras=self.cfg.cameras,
+            self.envs[key] = gym.make(SCENE_IDS[scene], task=None, objects=colours, cameras=self.cfg.cameras,
                                       image_size=self.cfg.image_size).unwrapped
         return self.envs[key]
 

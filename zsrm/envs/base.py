@@ -18,8 +18,8 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from zsrm.tasks.catalogue import SINGLE_TASKS
-from zsrm.tasks.language import COLOURS, GoalError, Task, parse_goal
+from zsrm.tasks.catalogue import as_task
+from zsrm.tasks.language import COLOURS, GoalError
 from zsrm.tasks.relations import CAMERAS, WORLD_THRESHOLDS, holds_in_world
 
 TABLE_TOP = 0.4
@@ -53,17 +53,6 @@ def check_colours(colours) -> tuple[str, ...]:
     if len(set(colours)) != len(colours):
         raise ValueError(f"objects must differ, got {', '.join(colours)}")
     return colours
-
-
-def as_task(task, shape: str) -> Task:
-    """A Task from a Task, a goal sentence or a catalogue name; checks it suits the scene."""
-    if isinstance(task, str):
-        task = parse_goal(SINGLE_TASKS[task].goal if task in SINGLE_TASKS else task)
-    if not isinstance(task, Task):
-        raise GoalError(f"expected a goal sentence or a Task, got {type(task).__name__}")
-    if task.shape != shape:
-        raise GoalError(f"this scene has {shape}s, but the goal {task.text!r} names {task.shape}s")
-    return task
 
 
 class MujocoPixelEnv(gym.Env):

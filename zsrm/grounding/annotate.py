@@ -12,7 +12,7 @@ For every shard of a dataset folder, the labels folder (``DATA/labels`` by defau
 
 >>> import tempfile
 >>> from zsrm.data.collect import CollectConfig, collect
->>> from zsrm.grounding.testing import ColourVLM
+>>> from zsrm.testing import ColourVLM
 >>> folder = tempfile.mkdtemp()
 >>> data = collect(CollectConfig(images=4, shard_size=4, episode_steps=2, record_every=1), folder, progress=False)
 >>> _ = label_dataset(folder, LabelConfig(vlm="testing"), vlm=ColourVLM(64), progress=False)
@@ -23,10 +23,11 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
-from zsrm.data.collect import SHAPE_OF
+from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.data.dataset import LABELS, ORACLE, ExplorationData
 from zsrm.data.shards import ShardFolder, save_json, save_npz
 from zsrm.grounding.gradcam import GradCAM
@@ -40,20 +41,20 @@ class LabelConfig:
     """Options of ``zsrm label``. Thresholds are in metres (Table 1's, for 6 cm blocks); each
     camera's pixel thresholds are these times that camera's pixels per metre."""
 
-    vlm: str = "scene"
-    target: str = "contrast"
-    locate: str = "peak_centroid"
-    cell_centres: str = "receptive_field"
+    vlm: str = "scene"  # the VLM Grad-CAM reads: scene, a saved VLM folder, open_clip:MODEL[:TAG]
+    target: Literal["contrast", "score"] = "contrast"  # Grad-CAM target: a phrase's score minus the other colours' mean, or the score
+    locate: Literal["argmax", "peak_centroid"] = "peak_centroid"  # object position: the heat map's argmax cell, or the centroid of its peak
+    cell_centres: Literal["grid", "receptive_field"] = "receptive_field"  # pixel position of each Grad-CAM cell: its geometric centre, or the peak of its measured input gradient
     template: str = "{}"  # how a phrase is written to the text tower, e.g. "a {}"
-    batch_size: int = 64
-    thresholds: dict = field(default_factory=lambda: asdict(WORLD_THRESHOLDS))
+    batch_size: int = 64  # images per Grad-CAM batch
+    thresholds: dict = field(default_factory=lambda: asdict(WORLD_THRESHOLDS), metadata={"cli": False})  # Table 1's, in metres
 
     def world_thresholds(self) -> Thresholds:
         return Thresholds(**self.thresholds)
 
 
 def phrases_for(scene: str, colours) -> list[str]:
-    return [f"{c} {SHAPE_OF[scene]}" for c in colours]
+    return [f"{c} {SCENE_SHAPES[scene]}" for c in colours]
 
 
 class Grounder:
@@ -113,8 +114,8 @@ def labelers(data: ExplorationData, cfg: LabelConfig) -> dict[str, SpatialLabele
     out = {}
     for scene in data.scenes:
         table = data.table_homography.get(scene, {})
-        thresholds = pixel_thresholds(data.block_width_px[scene], SHAPE_OF[scene], cfg.world_thresholds(), table)
-        out[scene] = SpatialLabeler(thresholds, shape=SHAPE_OF[scene], table_homography=table)
+        thresholds = pixel_thresholds(data.block_width_px[scene], SCENE_SHAPES[scene], cfg.world_thresholds(), table)
+        out[scene] = SpatialLabeler(thresholds, shape=SCENE_SHAPES[scene], table_homography=table)
     return out
 
 
@@ -138,7 +139,7 @@ def world_captions(data: ExplorationData, cfg: LabelConfig, positions, present, 
         rows = np.nonzero(scene_index == s)[0]
         if len(rows):
             table = world_table(positions[rows], present[rows], thresholds=cfg.world_thresholds())
-            for r, cap in zip(rows, table.captions(SHAPE_OF[scene])):
+            for r, cap in zip(rows, table.captions(SCENE_SHAPES[scene])):
                 out[r] = cap
     return out
 

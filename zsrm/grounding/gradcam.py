@@ -14,7 +14,7 @@ forward and backward pass per phrase, kept to test against and to benchmark.
 
 >>> import numpy as np
 >>> from zsrm.grounding.gradcam import GradCAM
->>> from zsrm.grounding.testing import ColourVLM
+>>> from zsrm.testing import ColourVLM
 >>> image = np.zeros((32, 32, 3), np.uint8); image[4:10, 20:26] = (220, 30, 30)
 >>> result = GradCAM(ColourVLM(), locate="argmax")(image[None], ["red block", "blue block"])
 >>> result.xy[0, 0].round(), bool(result.found[0, 1])
@@ -28,6 +28,9 @@ from typing import Sequence
 import numpy as np
 import torch
 from torch import nn
+
+from zsrm.vlm.base import image_batch
+from zsrm.vlm.text_cache import TextEmbeddingCache
 
 TARGETS = ("contrast", "score")
 LOCATE = ("argmax", "peak_centroid")
@@ -56,8 +59,6 @@ class GradCAMResult:
 
 def _as_batch(images) -> list[np.ndarray]:
     """Checked uint8 (H, W, 3) arrays, from any image batch the VLM interface accepts."""
-    from zsrm.vlm.base import image_batch
-
     return image_batch(images)
 
 
@@ -90,12 +91,10 @@ class GradCAM:
     def __init__(self, vlm, target: str = "contrast", contrast: Sequence[str] | None = None,
                  locate: str = "peak_centroid", cell_centres: str = "receptive_field",
                  presence_threshold: float | str | None = "auto", batch_size: int = 32, template: str = "{}"):
-        if target not in TARGETS:
-            raise ValueError(f"unknown Grad-CAM target {target!r}; choose one of {', '.join(TARGETS)}")
-        if locate not in LOCATE:
-            raise ValueError(f"unknown locate method {locate!r}; choose one of {', '.join(LOCATE)}")
-        if cell_centres not in CELL_CENTRES:
-            raise ValueError(f"unknown cell_centres {cell_centres!r}; choose one of {', '.join(CELL_CENTRES)}")
+        for what, value, known in (("Grad-CAM target", target, TARGETS), ("locate method", locate, LOCATE),
+                                    ("cell_centres", cell_centres, CELL_CENTRES)):
+            if value not in known:
+                raise ValueError(f"unknown {what} {value!r}; choose one of {', '.join(known)}")
         if batch_size < 1:
             raise ValueError(f"batch_size must be positive, got {batch_size}")
         self.vlm = vlm.eval()
@@ -108,17 +107,13 @@ class GradCAM:
         self.presence_threshold = presence_threshold
         self.batch_size = batch_size
         self.template = template
-        self._text_cache: dict[str, torch.Tensor] = {}
+        self._text_cache = TextEmbeddingCache(
+            lambda phrases: self.vlm.encode_texts([self.template.format(p) for p in phrases]).float())
         self._centres: dict[tuple, np.ndarray] = {}
 
     # --- targets ---------------------------------------------------------------------------
     def _texts(self, phrases: Sequence[str]) -> torch.Tensor:
-        missing = [p for p in phrases if p not in self._text_cache]
-        if missing:
-            with torch.no_grad():
-                emb = self.vlm.encode_texts([self.template.format(p) for p in missing]).float()
-            self._text_cache.update(zip(missing, emb))
-        return torch.stack([self._text_cache[p] for p in phrases])
+        return self._text_cache(phrases)
 
     def target_vectors(self, phrases: Sequence[str]) -> torch.Tensor:
         """(P, D): each phrase's target is the dot product of this vector with the normalised

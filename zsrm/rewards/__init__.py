@@ -6,19 +6,18 @@ from __future__ import annotations
 
 import importlib
 
-# Lazy: `zsrm` CLI start-up imports this package; torch and SB3 load only when used.
+# Lazy: torch and SB3 load only when a reward is used.
 _EXPORTS = {
-    "RewardModel": "zsrm.rewards.reward_model",
-    "TextEmbeddingCache": "zsrm.rewards.reward_model",
-    "check_goal": "zsrm.rewards.reward_model",
-    "check_images": "zsrm.rewards.reward_model",
+    "RewardModel": "zsrm.rewards.interface",
+    "check_goal": "zsrm.rewards.interface",
+    "check_images": "zsrm.rewards.interface",
+    "TextEmbeddingCache": "zsrm.vlm.text_cache",
     "BaseReward": "zsrm.rewards.base",
     "projection_reward": "zsrm.rewards.base",
     "OracleReward": "zsrm.rewards.oracle",
-    "ZSRMReward": "zsrm.rewards.zsrm",
+    "ZSRMReward": "zsrm.rewards.binarised",
     "ZeroShotReward": "zsrm.rewards.wrappers",
     "VecZeroShotReward": "zsrm.rewards.wrappers",
-    "reward_curve": "zsrm.rewards.curve",
 }
 
 __all__ = list(_EXPORTS)

@@ -15,7 +15,8 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from zsrm.rewards.reward_model import RewardModel, TextEmbeddingCache, check_goal, check_images
+from zsrm.rewards.interface import RewardModel, check_goal, check_images
+from zsrm.vlm.text_cache import TextEmbeddingCache
 
 MODES = ("dot", "cosine", "projection")
 

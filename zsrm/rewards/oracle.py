@@ -9,7 +9,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from zsrm.rewards.reward_model import RewardModel
+from zsrm.rewards.interface import RewardModel
 
 
 class OracleReward(RewardModel):

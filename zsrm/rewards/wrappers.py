@@ -1,4 +1,4 @@
-"""Wrappers that replace an env's reward by a :class:`~zsrm.rewards.reward_model.RewardModel`'s.
+"""Wrappers that replace an env's reward by a :class:`~zsrm.rewards.interface.RewardModel`'s.
 
 * :class:`ZeroShotReward`: a gymnasium wrapper for one env.
 * :class:`VecZeroShotReward`: a stable-baselines3 ``VecEnvWrapper`` that scores all envs of a
@@ -14,7 +14,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
-from zsrm.rewards.reward_model import RewardModel, check_goal
+from zsrm.rewards.interface import RewardModel, check_goal
 
 INFO_KEY = "zsrm_reward"
 

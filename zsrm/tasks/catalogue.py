@@ -27,6 +27,11 @@ TABLETOP_ID = "zsrm/Tabletop-v0"
 PUSHING_ID = "zsrm/Pushing-v0"
 PENDULUM_ID = "zsrm/DoublePendulum-v0"
 
+# The two object scenes: the env each is registered as, and the shape of its objects. The order
+# is the scenes' index wherever data store a scene as a number (0 tabletop, 1 pushing).
+SCENE_IDS = {"tabletop": TABLETOP_ID, "pushing": PUSHING_ID}
+SCENE_SHAPES = {"tabletop": "block", "pushing": "puck"}
+
 SINGLE_TASKS: dict[str, CatalogueEntry] = {
     e.name: e
     for e in (
@@ -37,6 +42,10 @@ SINGLE_TASKS: dict[str, CatalogueEntry] = {
         CatalogueEntry("pendulum", PENDULUM_ID, "an inverted pendulum standing upright"),
     )
 }
+
+
+# The spatial single tasks every report and evaluation runs (one per scene and relation kind).
+REPORT_TASKS = ("stack", "place_left", "place_right", "push_close")
 
 
 def _multitask(pairs) -> list[Task]:
@@ -61,3 +70,20 @@ def resolve(name_or_goal: str) -> CatalogueEntry:
         raise GoalError(f"{err} (or name a catalogue task: {', '.join(SINGLE_TASKS)})") from None
     env_id = PUSHING_ID if task.scene == "pushing" else TABLETOP_ID
     return CatalogueEntry(task.text, env_id, task.text)
+
+
+def as_task(task: "str | Task", shape: str | None = None) -> Task:
+    """A Task from a Task, a goal sentence or a catalogue name (GoalError for anything that is
+    not a spatial goal); with ``shape``, also checks that the goal names objects of that shape.
+
+    >>> as_task("stack").text
+    'a yellow block on top of a red block'
+    """
+    if isinstance(task, str):
+        entry = SINGLE_TASKS.get(task)
+        task = parse_goal(entry.goal if entry else task)
+    if not isinstance(task, Task):
+        raise GoalError(f"a goal must be a sentence or a Task, got {type(task).__name__}")
+    if shape is not None and task.shape != shape:
+        raise GoalError(f"this scene has {shape}s, but the goal {task.text!r} names {task.shape}s")
+    return task

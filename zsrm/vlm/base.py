@@ -171,3 +171,14 @@ def pixels_from_images(images: ImageBatch, size: int, mean, std, crop: bool = Tr
             x = x.clamp(0.0, 1.0)
         out[idx] = (x - mean_t) / std_t
     return out
+
+
+def check_image_tower(config, stages: int, multiple: int) -> None:
+    """Normalise and check a conv image tower's config in place (JSON gives lists, not tuples):
+    ``widths`` must have ``stages`` entries and ``image_size`` be a multiple of ``multiple``."""
+    config.widths = tuple(int(w) for w in config.widths)
+    config.mean, config.std = tuple(config.mean), tuple(config.std)
+    if len(config.widths) != stages:
+        raise ValueError(f"widths must have {stages} entries, got {config.widths}")
+    if config.image_size % multiple:
+        raise ValueError(f"image_size must be a multiple of {multiple}, got {config.image_size}")

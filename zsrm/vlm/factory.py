@@ -3,8 +3,9 @@
 Specs (open_clip style: factory functions, architectures as data):
 
 * ``"scene"``: the pretrained scene VLM shipped in ``zsrm/vlm/weights/scene/`` (built by
-  ``zsrm pretrain-vlm``);
-* a folder saved by ``vlm.save(folder)``: its ``config.json`` names the backend;
+  ``zsrm pretrain-vlm``); likewise ``"student"``, the reward student shipped with
+  :mod:`zsrm.fullmodel` (see :mod:`zsrm.vlm.registry`);
+* a folder saved by ``vlm.save(folder)``: its ``config.json`` names the model's kind;
 * ``"open_clip:MODEL"``: open_clip's default weights for MODEL (``open_clip:RN50`` is OpenAI's
   RN50, the paper's model); ``"open_clip"`` alone means ``open_clip:RN50``;
 * ``"open_clip:MODEL:TAG"``: a pretrained tag, e.g. ``open_clip:RN50:yfcc15m``;
@@ -21,12 +22,21 @@ from pathlib import Path
 import torch
 
 from zsrm.vlm.base import VisionLanguageModel
-from zsrm.vlm.scene import CONFIG_FILE, WEIGHTS_FILE, SceneVLM, read_config
+from zsrm.vlm.registry import SHIPPED, WEIGHTS_FILE, load_folder
 
-SHIPPED_SCENE_DIR = Path(__file__).resolve().parent / "weights" / "scene"
 DEFAULT_OPEN_CLIP_MODEL = "RN50"
 SPEC_HELP = ("'scene', a saved model folder, 'open_clip:MODEL' (e.g. open_clip:RN50), 'open_clip:MODEL:TAG', "
              "'open_clip:MODEL:/path/to/checkpoint.safetensors' or 'open_clip:MODEL:none'")
+HOW_TO_BUILD = {"scene": "build it with `zsrm pretrain-vlm` (about 15 minutes on 2 CPU cores)",
+                "student": "reinstall zsrm or train one with zsrm finetune --student"}
+
+
+def shipped_folder(name: str) -> Path:
+    """The folder of a model shipped with zsrm; FileNotFoundError saying how to build it if missing."""
+    folder = SHIPPED[name]
+    if not (folder / WEIGHTS_FILE).is_file():
+        raise FileNotFoundError(f"the shipped {name} model is missing from {folder}; {HOW_TO_BUILD.get(name, '')}")
+    return folder
 
 
 def load_vlm(spec: str | Path = "scene", device: str | torch.device = "cpu") -> VisionLanguageModel:
@@ -36,11 +46,8 @@ def load_vlm(spec: str | Path = "scene", device: str | torch.device = "cpu") -> 
     if not isinstance(spec, str) or not spec.strip():
         raise ValueError(f"give a VLM spec: {SPEC_HELP}")
     spec = spec.strip()
-    if spec == "scene":
-        if not (SHIPPED_SCENE_DIR / WEIGHTS_FILE).is_file():
-            raise FileNotFoundError(f"the pretrained scene VLM is missing from {SHIPPED_SCENE_DIR}; "
-                                    "build it with `zsrm pretrain-vlm` (about 15 minutes on 2 CPU cores)")
-        return SceneVLM.from_folder(SHIPPED_SCENE_DIR, device)
+    if spec in SHIPPED:
+        return load_folder(shipped_folder(spec), device)
     if spec == "open_clip" or spec.startswith("open_clip:"):
         from zsrm.vlm.openclip import create_open_clip_vlm
 
@@ -53,16 +60,3 @@ def load_vlm(spec: str | Path = "scene", device: str | torch.device = "cpu") -> 
         return load_folder(path, device)
     raise ValueError(f"unknown VLM spec {spec!r}: expected {SPEC_HELP}"
                      + (f" ({path} does not exist)" if "/" in spec else ""))
-
-
-def load_folder(folder: str | Path, device: str | torch.device = "cpu") -> VisionLanguageModel:
-    """A VLM saved with ``vlm.save(folder)``."""
-    folder = Path(folder)
-    backend = read_config(folder).get("backend")
-    if backend == "scene":
-        return SceneVLM.from_folder(folder, device)
-    if backend == "open_clip":
-        from zsrm.vlm.openclip import OpenClipVLM
-
-        return OpenClipVLM.from_folder(folder, device)
-    raise ValueError(f"{folder / CONFIG_FILE} names an unknown backend {backend!r}; known: scene, open_clip")

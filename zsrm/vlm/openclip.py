@@ -26,7 +26,7 @@ import torch
 from torch import nn
 
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel, pixels_from_images
-from zsrm.vlm.scene import CONFIG_FILE, WEIGHTS_FILE
+from zsrm.vlm.registry import WEIGHTS_FILE, load_weights as load_folder_weights, read_config, register_kind, save_folder
 
 CHECKPOINT_SUFFIXES = (".safetensors", ".pt", ".pth", ".bin")
 HF_SAFE_WEIGHTS = "open_clip_model.safetensors"
@@ -113,11 +113,6 @@ class OpenClipVLM(VisionLanguageModel):
     # --- persistence ---------------------------------------------------------------------
     def save(self, folder: str | Path) -> None:
         """``model.safetensors`` holds open_clip's own state dict, so open_clip can read it too."""
-        from safetensors.torch import save_model
-
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        save_model(self.clip, str(folder / WEIGHTS_FILE))
         config = {
             "backend": self.backend,
             "model_name": self.model_name,
@@ -126,21 +121,17 @@ class OpenClipVLM(VisionLanguageModel):
             "model_cfg": self.model_cfg,
             "meta": {"pretrained": self.pretrained},
         }
-        (folder / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
+        save_folder(folder, config, {WEIGHTS_FILE: self.clip})
 
     @classmethod
     def from_folder(cls, folder: str | Path, device: str | torch.device = "cpu") -> "OpenClipVLM":
-        from zsrm.vlm.scene import read_config
-
-        folder = Path(folder)
-        cfg = read_config(folder)
-        if cfg.get("backend") != cls.backend:
-            raise ValueError(f"{folder} holds a {cfg.get('backend')!r} model, not an open_clip model")
+        cfg = read_config(folder, kind=cls.backend)
         _register_model_cfg(cfg["model_name"], cfg.get("model_cfg"))
-        return create_open_clip_vlm(cfg["model_name"], str(folder / WEIGHTS_FILE), device=device,
-                                    quick_gelu=cfg.get("quick_gelu", False),
-                                    preprocess_cfg=cfg.get("preprocess_cfg"),
-                                    provenance=cfg.get("meta", {}).get("pretrained"))
+        vlm = create_open_clip_vlm(cfg["model_name"], "none", quick_gelu=cfg.get("quick_gelu", False),
+                                   preprocess_cfg=cfg.get("preprocess_cfg"),
+                                   provenance=cfg.get("meta", {}).get("pretrained"))
+        load_folder_weights(vlm.clip, folder, device=device)
+        return vlm.to(device).eval()
 
 
 def _jsonable(d: dict) -> dict:
@@ -290,3 +281,6 @@ def create_open_clip_vlm(model_name: str = "RN50", pretrained: str | None = "def
         load_weights(clip, checkpoint)
     vlm = OpenClipVLM(clip, model_name, provenance or pretrained, quick_gelu)
     return vlm.to(device).eval()
+
+
+register_kind(OpenClipVLM.backend, OpenClipVLM.from_folder)

@@ -1,10 +1,9 @@
-"""Renders labelled with which objects they show: the scene VLM's pretraining and test data.
+"""What the scene VLM learns and is tested on: which objects an image shows, never where.
 
-Each scene is a tabletop (blocks) or pushing (pucks) exploration scene with a random subset
-of the four colours, a random arm/pusher position and a few random actions, seen by all
-three cameras. An object counts as visible in an image when at least
-:data:`MIN_VISIBLE_PIXELS` of its pixels show (MuJoCo's segmentation render), so blocks hidden
-by the gripper or fallen off the table are not named.
+The images are renders made by a data stage (:mod:`zsrm.data.renders`) with the count of
+each colour's visible pixels; an object counts as visible when at least
+:data:`MIN_VISIBLE_PIXELS` of its pixels show, so blocks hidden by the gripper or fallen off
+the table are not named.
 
 Captions say *what* is visible, never *where*: a random non-empty subset of the visible
 objects in random order ("a blue block and a red block"). A caption never lists everything
@@ -16,14 +15,12 @@ from __future__ import annotations
 from typing import Iterable
 
 import numpy as np
+import torch
 
+from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
-from zsrm.tasks.relations import CAMERAS
 
-SCENES = ("tabletop", "pushing")
-SHAPES = {"tabletop": "block", "pushing": "puck"}
 MIN_VISIBLE_PIXELS = 5  # at 64 px; scaled with image area for other sizes
-STREAMS = {"train": 0, "eval": 1}  # disjoint seed streams for training and held-out scenes
 
 
 def min_visible_pixels(image_size: int) -> int:
@@ -66,106 +63,28 @@ def all_presence_captions(shape: str) -> list[str]:
             for k in range(1, len(COLOURS) + 1) for perm in permutations(COLOURS, k)]
 
 
-def scene_plan(index: int, seed: int, stream: str = "train", max_actions: int = 10) -> dict:
-    """What scene ``index`` of a seeded stream holds: scene kind, colours, env seed, actions."""
-    rng = np.random.default_rng([STREAMS[stream], seed, index])
-    scene = SCENES[int(rng.integers(len(SCENES)))]
-    k = int(rng.integers(1, len(COLOURS) + 1))
-    colours = tuple(COLOURS[i] for i in sorted(rng.choice(len(COLOURS), k, replace=False)))
-    n_actions = int(rng.integers(0, max_actions + 1))
-    return {"scene": scene, "colours": colours, "env_seed": int(rng.integers(2**31 - 1)),
-            "actions_rng": rng, "n_actions": n_actions}
-
-
-class _SceneRenderer:
-    """One exploration env per (scene, colours), with a segmentation renderer to count visible pixels."""
-
-    def __init__(self, scene: str, colours: tuple[str, ...], size: int, cameras: tuple[str, ...]):
-        import mujoco
-
-        from zsrm.envs.pushing import PushingEnv
-        from zsrm.envs.tabletop import TabletopEnv
-
-        cls = TabletopEnv if scene == "tabletop" else PushingEnv
-        self.env = cls(task=None, objects=colours, cameras=cameras, image_size=size)
-        self.cameras = cameras
-        m = self.env.model
-        self.seg = mujoco.Renderer(m, size, size)
-        self.seg.enable_segmentation_rendering()
-        self.option = mujoco.MjvOption()
-        self.option.geomgroup[3] = 0  # the env's hidden (unused) objects
-        self.geoms = {}
-        for c in COLOURS:
-            body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"{cls.shape}_{c}")
-            self.geoms[c] = np.arange(m.body_geomadr[body], m.body_geomadr[body] + m.body_geomnum[body])
-        self.geom_type = int(mujoco.mjtObj.mjOBJ_GEOM)
-
-    def visible_pixels(self, camera: str) -> np.ndarray:
-        """Pixels of each colour's object in a camera, in COLOURS order."""
-        self.seg.update_scene(self.env.data, camera=camera, scene_option=self.option)
-        seg = self.seg.render()
-        ids = np.where(seg[..., 1] == self.geom_type, seg[..., 0], -1)
-        return np.array([np.isin(ids, self.geoms[c]).sum() for c in COLOURS])
-
-    def close(self):
-        self.seg.close()
-        self.env.close()
-
-
-def render_presence_scenes(indices: Iterable[int], seed: int = 0, stream: str = "train", size: int = 64,
-                           cameras: tuple[str, ...] = CAMERAS, max_actions: int = 10, progress=None) -> dict:
-    """Render scenes ``indices`` of a seeded stream from every camera.
-
-    Returns arrays, one row per image (scene-major, cameras in order): ``images`` (N, size,
-    size, 3) uint8, ``visible`` (N, 4) visible pixel counts in COLOURS order, ``in_scene``
-    (N, 4) bool (the object is in the scene, visible or not), ``shape`` (N,) 0 block / 1 puck,
-    ``camera`` (N,) index into ``cameras``, ``scene_index`` (N,). ``progress``: a callable
-    called once per scene (e.g. a tqdm bar's ``update``).
-    """
-    indices = list(indices)
-    plans = [scene_plan(i, seed, stream, max_actions) for i in indices]
-    renderers: dict[tuple, _SceneRenderer] = {}
-    n = len(indices) * len(cameras)
-    out = {
-        "images": np.zeros((n, size, size, 3), np.uint8),
-        "visible": np.zeros((n, len(COLOURS)), np.int32),
-        "in_scene": np.zeros((n, len(COLOURS)), bool),
-        "shape": np.zeros(n, np.uint8),
-        "camera": np.tile(np.arange(len(cameras), dtype=np.uint8), len(indices)),
-        "scene_index": np.repeat(np.asarray(indices, np.int64), len(cameras)),
-    }
-    # Scenes that share a kind and colours share an env (building one takes ~80 ms).
-    order = sorted(range(len(plans)), key=lambda j: (plans[j]["scene"], plans[j]["colours"]))
-    try:
-        for j in order:
-            plan = plans[j]
-            key = (plan["scene"], plan["colours"])
-            if key not in renderers:
-                for r in renderers.values():  # keep one env alive at a time
-                    r.close()
-                renderers = {key: _SceneRenderer(*key, size, tuple(cameras))}
-            r = renderers[key]
-            env, rng = r.env, plan["actions_rng"]
-            env.reset(seed=plan["env_seed"])
-            for _ in range(plan["n_actions"]):
-                *_, terminated, _, _ = env.step(rng.uniform(-1, 1, env.action_space.shape))
-                if terminated:  # an object fell off the table: keep the frame, it is still a scene
-                    break
-            frames = env.render_cameras(cameras)
-            rows = slice(j * len(cameras), (j + 1) * len(cameras))
-            out["images"][rows] = np.stack([frames[c] for c in cameras])
-            out["visible"][rows] = np.stack([r.visible_pixels(c) for c in cameras])
-            out["in_scene"][rows] = [c in plan["colours"] for c in COLOURS]
-            out["shape"][rows] = SCENES.index(plan["scene"])
-            if progress is not None:
-                progress(1)
-    finally:
-        for r in renderers.values():
-            r.close()
-    return out
-
-
 def visible_colours(visible_row: np.ndarray, image_size: int = 64) -> list[str]:
     """Colours whose objects show enough pixels to be named."""
     threshold = min_visible_pixels(image_size)
     return [c for c, n in zip(COLOURS, visible_row) if n >= threshold]
+
+
+def presence_scores(vlm, images: np.ndarray, shapes: np.ndarray, batch_size: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """(relative scores, raw cosine similarities), both (N, 4) in COLOURS order.
+
+    ``shapes[i]`` is the index of image i's scene in ``SCENE_SHAPES`` (0: tabletop, block
+    probes; 1: pushing, puck probes). The relative score of colour c is its probe's cosine
+    minus the mean cosine of the other colours' probes.
+    """
+    probes = {k: vlm.encode_texts([probe_text(c, shape) for c in COLOURS])
+              for k, shape in enumerate(SCENE_SHAPES.values())}
+    sims = np.zeros((len(images), len(COLOURS)), np.float32)
+    with torch.no_grad():
+        for lo in range(0, len(images), batch_size):
+            emb = vlm.encode_images(images[lo:lo + batch_size])
+            for k in probes:
+                rows = np.flatnonzero(shapes[lo:lo + batch_size] == k)
+                if len(rows):
+                    sims[lo + rows] = (emb[rows] @ probes[k].T).cpu().numpy()
+    others = (sims.sum(axis=1, keepdims=True) - sims) / (len(COLOURS) - 1)
+    return sims - others, sims

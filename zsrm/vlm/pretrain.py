@@ -4,50 +4,58 @@ The offline stand-in for CLIP's internet pretraining: renders of random scenes w
 colours, captioned with which objects they show (never where), and the multi-positive
 contrastive loss (identical captions in a batch are positives, not negatives).
 
-Resumable: renders are cached in shards (``WORKDIR/renders/shard-*.npz``) and the model,
-optimizer and step are checkpointed in ``WORKDIR/checkpoint/``; running the same command
-again continues where a killed run stopped. Every step's batch, captions and flips come from
+The renders are data, made by a data stage (:mod:`zsrm.data.renders`, cached in
+``WORKDIR/renders``) and handed to :func:`pretrain`: the VLM knows no simulator.
+
+Resumable: the model, optimizer and step are checkpointed in ``WORKDIR/checkpoint/``;
+running the same command again continues where a killed run stopped. Every step's batch, captions and flips come from
 ``np.random.default_rng([seed, step])``, so a resumed run matches an uninterrupted one.
 """
 from __future__ import annotations
 
 import csv
-import json
-import math
-import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import torch
 from torch import nn
 
 from zsrm.tasks.language import COLOURS
-from zsrm.vlm.factory import SHIPPED_SCENE_DIR
+from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.vlm.losses import multi_positive_contrastive_loss
 from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
-from zsrm.vlm.presence import SCENES, SHAPES, all_presence_captions, presence_caption, render_presence_scenes, \
-    visible_colours
-from zsrm.vlm.scene import SceneVLM, create_scene_vlm
+from zsrm.vlm.presence import all_presence_captions, presence_caption, visible_colours
+from zsrm.vlm.scene import SHIPPED_SCENE_DIR, SceneVLM, create_scene_vlm
+
+SHAPES = list(SCENE_SHAPES.values())  # a render's "shape" index -> the shape its captions name
 
 
 @dataclass
 class PretrainConfig:
-    out: str = str(SHIPPED_SCENE_DIR)  # where the final model is saved
-    workdir: str = "runs/pretrain-vlm"  # render cache, checkpoint and log
-    arch: str = "default"  # a key of SCENE_PRESETS
-    scenes: int = 4000  # x 3 cameras = training images
+    """Pretrain the offline scene VLM on captioned renders (resumable).
+
+    Render random tabletop and pushing scenes (all four colours, all cameras), caption each
+    image with which objects it shows (never where) and train the scene VLM contrastively.
+    Re-running the same command resumes from WORKDIR/checkpoint.
+    """
+
+    out: str = str(SHIPPED_SCENE_DIR)  # folder for the final model (default: the shipped zsrm/vlm/weights/scene)
+    workdir: str = "runs/pretrain-vlm"  # render cache, checkpoints and log
+    arch: Literal["default", "tiny"] = "default"  # architecture preset (SCENE_PRESETS)
+    scenes: int = 4000  # scenes to render, x3 cameras
     shard_size: int = 250  # scenes per cached render shard
-    image_size: int = 64
-    steps: int = 1200
-    batch_size: int = 128
-    lr: float = 2e-3
-    weight_decay: float = 0.05
-    warmup_steps: int = 100
-    seed: int = 0
-    checkpoint_every: int = 250
-    threads: int = 0  # torch threads; 0 keeps torch's default
+    image_size: int = 64  # render side in pixels
+    steps: int = 1200  # optimizer steps
+    batch_size: int = 128  # images per step
+    lr: float = 2e-3  # peak learning rate
+    weight_decay: float = 0.05  # AdamW weight decay of weight matrices
+    warmup_steps: int = 100  # linear warmup steps before the cosine decay
+    seed: int = 0  # seed of the renders, the initial weights and every batch
+    checkpoint_every: int = 250  # steps between checkpoints
+    threads: int = 0  # torch threads (0: torch's default)
 
     # Settings that define the run: a checkpoint made with others cannot be resumed.
     IDENTITY = ("arch", "scenes", "shard_size", "image_size", "steps", "batch_size", "lr", "weight_decay",
@@ -55,46 +63,6 @@ class PretrainConfig:
 
     def identity(self) -> dict:
         return {k: getattr(self, k) for k in self.IDENTITY}
-
-
-# --- data --------------------------------------------------------------------------------------
-def load_renders(cfg: PretrainConfig, progress: bool = True) -> dict:
-    """The training renders, rendered once and cached shard by shard (a killed run keeps its shards)."""
-    from tqdm import tqdm
-
-    folder = Path(cfg.workdir) / "renders"
-    folder.mkdir(parents=True, exist_ok=True)
-    manifest = folder / "manifest.json"
-    spec = {"seed": cfg.seed, "shard_size": cfg.shard_size, "image_size": cfg.image_size, "stream": "train"}
-    if manifest.exists() and json.loads(manifest.read_text()) != spec:
-        raise ValueError(f"{folder} holds renders made with other settings ({manifest.read_text().strip()}); "
-                         "use another --workdir or --fresh")
-    manifest.write_text(json.dumps(spec) + "\n")
-    shards = []
-    n_shards = math.ceil(cfg.scenes / cfg.shard_size)
-    with tqdm(total=n_shards * cfg.shard_size, desc="render scenes", unit="scene", disable=not progress) as bar:
-        for s in range(n_shards):
-            hi = min(cfg.scenes, (s + 1) * cfg.shard_size)
-            path = folder / f"shard-{s:04d}.npz"
-            if path.exists():
-                with np.load(path) as z:
-                    data = {k: z[k] for k in z.files}
-                shards.append(_take_scenes(data, hi))
-                bar.update(cfg.shard_size)
-                continue
-            # Always render whole shards so that a shard means the same scenes in every run.
-            data = render_presence_scenes(range(s * cfg.shard_size, (s + 1) * cfg.shard_size), seed=cfg.seed,
-                                          size=cfg.image_size, progress=bar.update)
-            tmp = path.with_suffix(".tmp.npz")
-            np.savez(tmp, **data)
-            tmp.replace(path)
-            shards.append(_take_scenes(data, hi))
-    return {k: np.concatenate([sh[k] for sh in shards]) for k in shards[0]}
-
-
-def _take_scenes(data: dict, end: int) -> dict:
-    keep = data["scene_index"] < end
-    return {k: v[keep] for k, v in data.items()}
 
 
 # --- training ----------------------------------------------------------------------------------
@@ -111,8 +79,8 @@ def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfi
     """Images (uint8 NHWC) and captions of one step, a pure function of (seed, step)."""
     rng = np.random.default_rng([cfg.seed, 1, step])
     rows = train_rows[rng.choice(len(train_rows), min(cfg.batch_size, len(train_rows)), replace=False)]
-    captions = [presence_caption(visible_colours(data["visible"][r], cfg.image_size), SHAPES[SCENES[data["shape"][r]]],
-                                 rng) for r in rows]
+    captions = [presence_caption(visible_colours(data["visible"][r], cfg.image_size), SHAPES[data["shape"][r]], rng)
+                for r in rows]
     images = data["images"][rows]
     # Mirror half the images: presence does not depend on left and right, captions never say where.
     flip = rng.random(len(rows)) < 0.5
@@ -140,18 +108,16 @@ def _load_checkpoint(folder: Path, cfg: PretrainConfig):
     return model, opt, state["step"], state["log"]
 
 
-def pretrain(cfg: PretrainConfig, fresh: bool = False, progress: bool = True) -> SceneVLM:
-    """Train (or resume training) a scene VLM and save it to ``cfg.out``."""
+def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True) -> SceneVLM:
+    """Train (or resume training) a scene VLM on renders ``data`` (see
+    :func:`zsrm.data.renders.render_presence_scenes`) and save it to ``cfg.out``."""
     from tqdm import tqdm
 
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     work = Path(cfg.workdir)
     ckpt = work / "checkpoint"
-    if fresh:
-        shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True, exist_ok=True)
-    data = load_renders(cfg, progress)
     # Images in which nothing is visible (all objects hidden or fallen) have no true caption.
     train_rows = np.array([r for r in range(len(data["images"])) if visible_colours(data["visible"][r], cfg.image_size)])
 
@@ -163,7 +129,7 @@ def pretrain(cfg: PretrainConfig, fresh: bool = False, progress: bool = True) ->
         opt, start, log = _optimizer(model, cfg), 0, []
     model.train()
     # Encode every possible caption once: the frozen sentence encoder then never runs again.
-    model.sentence_features([c for s in SHAPES.values() for c in all_presence_captions(s)])
+    model.sentence_features([c for s in SHAPES for c in all_presence_captions(s)])
 
     t0, elapsed_before = time.time(), (log[-1]["seconds"] if log else 0.0)
     bar = tqdm(total=cfg.steps, initial=start, desc="pretrain scene VLM", unit="step", disable=not progress)
@@ -202,9 +168,4 @@ def pretrain(cfg: PretrainConfig, fresh: bool = False, progress: bool = True) ->
     return model
 
 
-def config_from_args(args) -> PretrainConfig:
-    fields = PretrainConfig.__dataclass_fields__
-    return PretrainConfig(**{k: getattr(args, k) for k in fields if getattr(args, k, None) is not None})
-
-
-__all__ = ["PretrainConfig", "pretrain", "load_renders", "make_batch", "learning_rate"]
+__all__ = ["PretrainConfig", "pretrain", "make_batch", "learning_rate"]

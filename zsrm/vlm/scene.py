@@ -19,7 +19,6 @@ where they are, so it knows *what* is in a scene but not *where*: CLIP's role in
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -28,10 +27,12 @@ import numpy as np  # noqa: F401  (doctest)
 import torch
 from torch import nn
 
-from zsrm.vlm.base import ImageBatch, VisionLanguageModel, pixels_from_images
+from zsrm.vlm.base import ImageBatch, VisionLanguageModel, check_image_tower, pixels_from_images
+from zsrm.vlm.registry import WEIGHTS_FILE, load_weights, read_config, register_kind, register_shipped, save_folder
+from zsrm.vlm.text_cache import TextEmbeddingCache
 
-WEIGHTS_FILE = "model.safetensors"
-CONFIG_FILE = "config.json"
+# The pretrained scene VLM shipped with zsrm (built by `zsrm pretrain-vlm`), spec "scene".
+SHIPPED_SCENE_DIR = Path(__file__).resolve().parent / "weights" / "scene"
 
 
 @dataclass
@@ -49,12 +50,7 @@ class SceneConfig:
     groups: int = 8  # GroupNorm groups: no batch statistics, so train and eval modes agree
 
     def __post_init__(self):
-        self.widths = tuple(int(w) for w in self.widths)
-        self.mean, self.std = tuple(self.mean), tuple(self.std)
-        if len(self.widths) != 3:
-            raise ValueError(f"widths must have 3 entries, got {self.widths}")
-        if self.image_size % 4:
-            raise ValueError(f"image_size must be a multiple of 4, got {self.image_size}")
+        check_image_tower(self, stages=3, multiple=4)
         if self.text_encoder not in TEXT_ENCODERS:
             raise ValueError(f"unknown text encoder {self.text_encoder!r}; known: {', '.join(TEXT_ENCODERS)}")
 
@@ -109,7 +105,10 @@ class FrozenSentenceEncoder:
         self.name = name
         self.model = st.SentenceTransformer(TEXT_ENCODERS[name](), device="cpu")
         self.model.eval()
-        self.cache: dict[str, torch.Tensor] = {}
+        self.cache = TextEmbeddingCache(self._encode)
+
+    def _encode(self, texts: list[str]) -> torch.Tensor:
+        return self.model.encode(texts, convert_to_tensor=True, batch_size=256, show_progress_bar=False).float().cpu()
 
     @classmethod
     def get(cls, name: str) -> "FrozenSentenceEncoder":
@@ -118,13 +117,7 @@ class FrozenSentenceEncoder:
         return cls._loaded[name]
 
     def __call__(self, texts: list[str]) -> torch.Tensor:
-        missing = list(dict.fromkeys(t for t in texts if t not in self.cache))
-        if missing:
-            with torch.no_grad():
-                emb = self.model.encode(missing, convert_to_tensor=True, batch_size=256,
-                                        show_progress_bar=False).float().cpu()
-            self.cache.update(zip(missing, emb))
-        return torch.stack([self.cache[t] for t in texts])
+        return self.cache(texts)
 
 
 # --- the image tower --------------------------------------------------------------------------
@@ -214,38 +207,19 @@ class SceneVLM(VisionLanguageModel):
 
     # --- persistence ---------------------------------------------------------------------
     def save(self, folder: str | Path) -> None:
-        from safetensors.torch import save_model
-
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        save_model(self, str(folder / WEIGHTS_FILE))
         config = {"backend": self.backend, "config": asdict(self.config), "meta": self.meta}
-        (folder / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
+        save_folder(folder, config, {WEIGHTS_FILE: self})
 
     @classmethod
     def from_folder(cls, folder: str | Path, device: str | torch.device = "cpu") -> "SceneVLM":
-        from safetensors.torch import load_model
-
-        folder = Path(folder)
-        cfg = read_config(folder)
-        if cfg.get("backend") != cls.backend:
-            raise ValueError(f"{folder} holds a {cfg.get('backend')!r} model, not a scene model")
+        cfg = read_config(folder, kind=cls.backend)
         model = cls(SceneConfig.from_dict(cfg["config"]), meta=cfg.get("meta"))
-        weights = folder / WEIGHTS_FILE
-        if not weights.is_file():
-            raise FileNotFoundError(f"no {WEIGHTS_FILE} in {folder}")
-        load_model(model, str(weights), strict=True, device=str(device))
+        load_weights(model, folder, device=device)
         return model.to(device).eval()
 
 
-def read_config(folder: Path) -> dict:
-    path = Path(folder) / CONFIG_FILE
-    if not path.is_file():
-        raise FileNotFoundError(f"no {CONFIG_FILE} in {folder}: not a saved zsrm VLM folder")
-    try:
-        return json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise ValueError(f"{path} is not valid JSON: {err}") from None
+register_kind(SceneVLM.backend, SceneVLM.from_folder)
+register_shipped("scene", SHIPPED_SCENE_DIR)
 
 
 def create_scene_vlm(arch: str | SceneConfig = "default", seed: int | None = None, **overrides) -> SceneVLM:

@@ -15,7 +15,7 @@ import torch
 from torch import nn
 
 from zsrm.grounding.labeler import SpatialLabeler, pixel_thresholds
-from zsrm.reward_model.pairs import CaptionedImages
+from zsrm.fullmodel.pairs import CaptionedImages
 from zsrm.tasks.language import COLOURS, parse_goal
 from zsrm.tasks.relations import RELATIONS
 from zsrm.vlm.base import VisionLanguageModel, pixels_from_images

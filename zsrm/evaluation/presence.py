@@ -1,4 +1,4 @@
-"""``zsrm eval-vlm``: zero-shot object presence on held-out renders.
+"""``zsrm eval-vlm``: the scene VLM's zero-shot object presence on held-out renders.
 
 For every image and colour c the probe is "a c block" (or "a c puck" in the pushing scene);
 the score is its cosine similarity minus the mean similarity of the other colours' probes
@@ -17,40 +17,13 @@ import math
 import platform
 from pathlib import Path
 
-import numpy as np
-import torch
-
+from zsrm.data.renders import SCENES, render_presence_scenes
+from zsrm.evaluation.metrics import auroc
+from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import CAMERAS
 from zsrm.vlm.base import VisionLanguageModel
-from zsrm.vlm.presence import SCENES, SHAPES, min_visible_pixels, probe_text, render_presence_scenes
-
-
-def presence_scores(vlm: VisionLanguageModel, images: np.ndarray, shapes: np.ndarray,
-                    batch_size: int = 256) -> tuple[np.ndarray, np.ndarray]:
-    """(relative scores, raw cosine similarities), both (N, 4) in COLOURS order.
-
-    ``shapes[i]`` is 0 for a tabletop image (block probes), 1 for a pushing image (puck probes).
-    """
-    probes = {k: vlm.encode_texts([probe_text(c, SHAPES[s]) for c in COLOURS]) for k, s in enumerate(SCENES)}
-    sims = np.zeros((len(images), len(COLOURS)), np.float32)
-    with torch.no_grad():
-        for lo in range(0, len(images), batch_size):
-            emb = vlm.encode_images(images[lo:lo + batch_size])
-            for k in probes:
-                rows = np.flatnonzero(shapes[lo:lo + batch_size] == k)
-                if len(rows):
-                    sims[lo + rows] = (emb[rows] @ probes[k].T).cpu().numpy()
-    others = (sims.sum(axis=1, keepdims=True) - sims) / (len(COLOURS) - 1)
-    return sims - others, sims
-
-
-def _auroc(truth: np.ndarray, score: np.ndarray) -> float:
-    from sklearn.metrics import roc_auc_score
-
-    if truth.all() or not truth.any():
-        return float("nan")  # undefined with one class only
-    return float(roc_auc_score(truth, score))
+from zsrm.vlm.presence import min_visible_pixels, presence_scores
 
 
 def presence_eval(vlm: VisionLanguageModel, n_images: int = 500, seed: int = 0, image_size: int = 64,
@@ -75,11 +48,11 @@ def presence_eval(vlm: VisionLanguageModel, n_images: int = 500, seed: int = 0, 
     raw, by_camera, by_scene, counts = {}, {}, {}, {}
     for j, c in enumerate(COLOURS):
         m = used[:, j]
-        result[f"auroc.{c}"] = round(_auroc(present[m, j], scores[m, j]), 4)
-        raw[c] = round(_auroc(present[m, j], sims[m, j]), 4)
-        by_camera[c] = {cam: round(_auroc(present[m & (data["camera"] == k), j], scores[m & (data["camera"] == k), j]), 4)
+        result[f"auroc.{c}"] = round(auroc(scores[m, j], present[m, j]), 4)
+        raw[c] = round(auroc(sims[m, j], present[m, j]), 4)
+        by_camera[c] = {cam: round(auroc(scores[m & (data["camera"] == k), j], present[m & (data["camera"] == k), j]), 4)
                         for k, cam in enumerate(CAMERAS)}
-        by_scene[c] = {s: round(_auroc(present[m & (data["shape"] == k), j], scores[m & (data["shape"] == k), j]), 4)
+        by_scene[c] = {s: round(auroc(scores[m & (data["shape"] == k), j], present[m & (data["shape"] == k), j]), 4)
                        for k, s in enumerate(SCENES)}
         counts[c] = {"present": int(present[:, j].sum()), "absent": int(absent[:, j].sum()),
                      "left_out_partly_visible": int((~used[:, j]).sum())}
@@ -105,10 +78,7 @@ def presence_eval(vlm: VisionLanguageModel, n_images: int = 500, seed: int = 0, 
 
 def plot_presence(arrays: dict, result: dict, path: Path) -> Path:
     """ROC curves per colour (left) and score histograms, present against absent (right)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
     from sklearn.metrics import roc_curve
 
     colours = {"red": "#d62728", "green": "#2ca02c", "yellow": "#e6b800", "blue": "#1f77b4"}
@@ -128,11 +98,7 @@ def plot_presence(arrays: dict, result: dict, path: Path) -> Path:
                 title="filled: object visible, dashed: absent")
     n = result["meta"]["n_images"]
     fig.suptitle(f"scene VLM presence probes on {n} held-out renders (3 cameras, blocks and pucks)", fontsize=10)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def write_presence_results(result: dict, arrays: dict, out: Path) -> tuple[Path, Path]:

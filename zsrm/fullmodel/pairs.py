@@ -23,7 +23,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from zsrm.reward_model.negatives import COMPLEMENTS, caption_relation_camera, candidate_texts, complement_text
+from zsrm.tasks.negatives import COMPLEMENTS, caption_relation_camera, candidate_texts, complement_text
 from zsrm.tasks.language import Task
 
 
@@ -40,7 +40,7 @@ def caption_relation(caption: str) -> str:
 
 def complement_captions(captions: Sequence[str], colours: Sequence[str], shape: str) -> list[str]:
     """Complement captions of one image: "a far from b" for every ordered pair of its objects
-    between which the labeler found no "close to" (see :data:`~zsrm.reward_model.negatives.COMPLEMENTS`)."""
+    between which the labeler found no "close to" (see :data:`~zsrm.tasks.negatives.COMPLEMENTS`)."""
     have = set(captions)
     out = []
     for relation in COMPLEMENTS:
@@ -172,7 +172,7 @@ class CaptionedImages:
     def from_dataset(cls, folder: str | Path, labels: str | Path = "labels") -> "CaptionedImages":
         """A collected and labelled dataset folder: its images, the Grad-CAM captions of
         ``labels`` and, for the complements, each scene's object list (what the labeler reads)."""
-        from zsrm.data.collect import SHAPE_OF
+        from zsrm.tasks.catalogue import SCENE_SHAPES
         from zsrm.data.dataset import ExplorationData
 
         data = ExplorationData(folder)
@@ -184,6 +184,6 @@ class CaptionedImages:
                 images[c].append(arrays[f"images_{c}"])
             # Episodes are numbered within a shard: make the group ids unique across shards.
             groups.append(s * 1_000_000 + arrays["episode"].astype(np.int64))
-            objects += [(SHAPE_OF[data.scenes[sc]], [c for c, p in zip(data.colours, row) if p])
+            objects += [(SCENE_SHAPES[data.scenes[sc]], [c for c, p in zip(data.colours, row) if p])
                         for sc, row in zip(arrays["scene"], arrays["present"])]
         return cls({c: np.concatenate(v) for c, v in images.items()}, captions, np.concatenate(groups), objects)

@@ -13,7 +13,6 @@ embedding, and embeds a text as the one-hot vector of the colour it names. Grad-
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,7 @@ from torch import nn
 
 from zsrm.tasks.language import COLOURS
 from zsrm.vlm.base import VisionLanguageModel, pixels_from_images
+from zsrm.vlm.registry import save_folder
 
 # Linear colour detectors on RGB in [0, 1] (rows: red, green, yellow, blue) and biases: each
 # is positive on its block colour and negative on the others, the table, floor and walls.
@@ -63,6 +63,5 @@ class ColourVLM(VisionLanguageModel):
         return out
 
     def save(self, folder: str | Path) -> None:
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        (folder / "config.json").write_text(json.dumps({"backend": self.backend, "image_size": self.image_size, "stride": self.stride}))
+        """Its config only: the weights are fixed by construction."""
+        save_folder(folder, {"backend": self.backend, "image_size": self.image_size, "stride": self.stride}, {})

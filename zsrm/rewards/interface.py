@@ -9,13 +9,14 @@ A reward model scores a *batch* of observations for one goal sentence::
 models that read only ``infos``, like the oracle). ``infos`` is the list of the N envs' info
 dicts; only privileged rewards (oracle, evaluation) may read it.
 
-Models that embed the goal text keep the embedding in a :class:`TextEmbeddingCache`, so the text
-tower runs once per goal, not once per step.
+Models that embed the goal text keep the embedding in a
+:class:`~zsrm.vlm.text_cache.TextEmbeddingCache`, so the text tower runs once per goal, not once
+per step.
 """
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Callable, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 import torch
@@ -51,56 +52,6 @@ def batch_size_of(observations: Mapping[str, np.ndarray] | None, infos: Sequence
     if len(sizes) != 1:
         raise ValueError(f"observations and infos must hold the same number of envs, got sizes {sorted(sizes)}")
     return sizes.pop()
-
-
-class TextEmbeddingCache:
-    """Text embeddings computed once per distinct text and reused.
-
-    ``encode`` maps a list of texts to a ``(M, D)`` tensor; texts missing from the cache are
-    encoded together in one call. With ``enabled=False`` every call encodes (the simple way,
-    kept for benchmarks). The cache assumes a frozen text tower: call :meth:`clear` after
-    changing its weights.
-
-    >>> import torch
-    >>> calls = []
-    >>> cache = TextEmbeddingCache(lambda texts: calls.append(texts) or torch.ones(len(texts), 4))
-    >>> cache(["a red block"]).shape, cache(["a red block", "a blue block"]).shape
-    (torch.Size([1, 4]), torch.Size([2, 4]))
-    >>> calls  # the second call encoded only the new text
-    [['a red block'], ['a blue block']]
-    """
-
-    def __init__(self, encode: Callable[[list[str]], torch.Tensor], enabled: bool = True):
-        self.encode = encode
-        self.enabled = enabled
-        self._store: dict[str, torch.Tensor] = {}
-        self.hits = 0
-        self.misses = 0
-
-    def __call__(self, texts: Sequence[str]) -> torch.Tensor:
-        texts = [texts] if isinstance(texts, str) else list(texts)
-        if not self.enabled:
-            self.misses += len(texts)
-            with torch.no_grad():
-                return self.encode(texts)
-        missing = list(dict.fromkeys(t for t in texts if t not in self._store))
-        self.hits += len(texts) - len(missing)
-        self.misses += len(missing)
-        if missing:
-            with torch.no_grad():
-                emb = self.encode(missing)
-            for text, e in zip(missing, emb):
-                self._store[text] = e
-        return torch.stack([self._store[t] for t in texts])
-
-    def __contains__(self, text: str) -> bool:
-        return text in self._store
-
-    def __len__(self) -> int:
-        return len(self._store)
-
-    def clear(self) -> None:
-        self._store.clear()
 
 
 class RewardModel(ABC):

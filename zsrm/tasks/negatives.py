@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import re
 
-from zsrm.tasks.language import GoalError, Task, parse_goal
+from zsrm.tasks.catalogue import as_task
+from zsrm.tasks.language import Task, parse_goal
 from zsrm.tasks.relations import RELATIONS
 
 # Relations whose predicate does not change when the two objects swap (Table 1: both read a
@@ -61,15 +62,6 @@ def caption_relation_camera(caption: str) -> tuple[str, str]:
             return name, COMPLEMENT_CAMERA[name]
     relation = parse_goal(caption).relation
     return relation, RELATIONS[relation].camera
-
-
-def as_task(goal: str | Task) -> Task:
-    """A Task from a Task or a goal sentence (GoalError if it is not a spatial goal)."""
-    if isinstance(goal, Task):
-        return goal
-    if not isinstance(goal, str):
-        raise GoalError(f"a goal must be a sentence or a Task, got {type(goal).__name__}")
-    return parse_goal(goal)
 
 
 def swapped_tasks(task: Task) -> list[Task]:

@@ -1,6 +1,6 @@
 """The full zero-shot reward (ZSRM, paper 2.2): the binarised reward of the fine-tuned model.
 
-The goal text and its negatives (:mod:`zsrm.reward_model.negatives`: the other relations
+The goal text and its negatives (:mod:`zsrm.tasks.negatives`: the other relations
 over the same objects and the swapped object order) are scored against the frame of the
 camera the goal's relation is read on; the reward is 1 when the goal text wins the argmax,
 else 0 (no threshold to tune). The raw score, the cosine of the frame and the goal text,
@@ -8,16 +8,16 @@ stays available (``output="raw"``), and so does the margin of the goal over its 
 negative (``output="margin"``, > 0 exactly when the binarised reward is 1).
 
 Any :class:`~zsrm.vlm.base.VisionLanguageModel` can score: the fine-tuned VLM, the student
-network (:mod:`zsrm.reward_model.student`), or the base VLM itself (the base reward with the
+network (:mod:`zsrm.fullmodel.student`), or the base VLM itself (the base reward with the
 same binarisation, for comparison). Text embeddings are computed once per goal.
 
 >>> import numpy as np
->>> from zsrm.grounding.testing import ColourVLM
+>>> from zsrm.testing import ColourVLM
 >>> reward = ZSRMReward(ColourVLM())
 >>> frames = np.zeros((3, 32, 32, 3), np.uint8)
 >>> reward({"front": frames}, "a yellow block on top of a red block").shape
 (3,)
->>> reward.camera  # the camera "on top of" is read on
+>>> reward.goal_camera("a yellow block on top of a red block")  # the camera "on top of" is read on
 'front'
 """
 from __future__ import annotations
@@ -28,11 +28,34 @@ from typing import Mapping, Sequence
 import numpy as np
 import torch
 
-from zsrm.reward_model.negatives import as_task, candidate_texts
-from zsrm.rewards.reward_model import RewardModel, TextEmbeddingCache, check_goal, check_images
+from zsrm.rewards.interface import RewardModel, check_goal, check_images
+from zsrm.tasks.catalogue import as_task
+from zsrm.tasks.negatives import candidate_texts
 from zsrm.tasks.relations import RELATIONS
+from zsrm.vlm.text_cache import TextEmbeddingCache
 
 OUTPUTS = ("binary", "raw", "margin")
+
+
+def decide(sims: np.ndarray) -> dict[str, np.ndarray]:
+    """The binarised reward's rule, in one place: from cosines (N, 1 + negatives) of frames with
+    the goal text (column 0) and its negatives, ``binary`` is 1 where the goal text wins the
+    argmax (ties go to the goal, as np.argmax takes the first column), ``raw`` the goal's cosine
+    and ``margin`` the goal's cosine minus the best negative's (> 0 exactly where ``binary`` is 1,
+    but for ties).
+
+    >>> decide(np.array([[0.9, 0.2], [0.1, 0.5]]))["binary"]
+    array([1., 0.], dtype=float32)
+    """
+    sims = np.asarray(sims)
+    return {"binary": (sims.argmax(axis=1) == 0).astype(np.float32), "raw": sims[:, 0].astype(np.float32),
+            "margin": (sims[:, 0] - sims[:, 1:].max(axis=1)).astype(np.float32)}
+
+
+def _check_output(output: str) -> str:
+    if output not in OUTPUTS:
+        raise ValueError(f"unknown output {output!r}; choose one of {', '.join(OUTPUTS)}")
+    return output
 
 
 class ZSRMReward(RewardModel):
@@ -50,14 +73,11 @@ class ZSRMReward(RewardModel):
 
     def __init__(self, model, output: str = "binary", camera: str | None = None, batch_size: int = 256,
                  cache_texts: bool = True, name: str | None = None):
-        if output not in OUTPUTS:
-            raise ValueError(f"unknown output {output!r}; choose one of {', '.join(OUTPUTS)}")
+        self.output = _check_output(output)
         if batch_size < 1:
             raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         self.model = model.eval()
-        self.output = output
-        self.fixed_camera = camera
-        self.camera = camera
+        self.fixed_camera = self.camera = camera
         self.batch_size = int(batch_size)
         if name is not None:
             self.name = name
@@ -70,7 +90,7 @@ class ZSRMReward(RewardModel):
     @classmethod
     def from_folder(cls, folder: str | Path, **kwargs) -> "ZSRMReward":
         """A model folder written by ``zsrm finetune`` (the VLM, or the student with ``--student``)."""
-        from zsrm.reward_model.student import load_reward_backbone
+        from zsrm.fullmodel import load_reward_backbone
 
         return cls(load_reward_backbone(folder), **kwargs)
 
@@ -102,19 +122,13 @@ class ZSRMReward(RewardModel):
             out.append(emb @ texts.to(emb.device).T)
         return torch.cat(out).cpu().numpy()
 
+    def outputs(self, images: np.ndarray, goal: str) -> dict[str, np.ndarray]:
+        """Every output (see :func:`decide`) of frames of the goal's camera, from one forward."""
+        return decide(self.similarities(images, goal))
+
     def score(self, images: np.ndarray, goal: str, output: str | None = None) -> np.ndarray:
         """Rewards (N,) of frames of the goal's camera, as ``output`` (default: this model's)."""
-        output = output or self.output
-        if output not in OUTPUTS:
-            raise ValueError(f"unknown output {output!r}; choose one of {', '.join(OUTPUTS)}")
-        sims = self.similarities(images, goal)
-        if output == "raw":
-            return sims[:, 0].astype(np.float32)
-        margin = sims[:, 0] - sims[:, 1:].max(axis=1)
-        if output == "margin":
-            return margin.astype(np.float32)
-        # The goal wins the argmax (ties go to the first column, the goal, as np.argmax does).
-        return (sims.argmax(axis=1) == 0).astype(np.float32)
+        return self.outputs(images, goal)[_check_output(output or self.output)]
 
     def compute(self, observations: Mapping[str, np.ndarray] | None, goal: str,
                 infos: Sequence[dict] | None) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Reward along a scripted trajectory (the paper's Figure 5), for any reward models.
+"""``zsrm reward-curve``: reward along a scripted trajectory (the paper's Figure 5), for any reward models.
 
 A true-state scripted controller (:mod:`zsrm.envs.scripted`) carries out the goal, e.g. in
 the pushing scene it pushes the first puck of "a yellow puck close to a blue puck" (yellow)
@@ -6,8 +6,8 @@ toward the second (blue). Every frame, from the reset frame on, is scored by eac
 model; the table also holds the distance between the goal's first two objects (true state,
 metres) and the oracle's verdict.
 
->>> from zsrm.rewards import BaseReward, OracleReward
->>> from zsrm.rewards.curve import record_trajectory, reward_curve
+>>> from zsrm.rewards import OracleReward
+>>> from zsrm.evaluation.curves import record_trajectory, reward_curve
 >>> traj = record_trajectory("a yellow puck close to a blue puck", cameras=("tilted",), steps=5)
 >>> rows = reward_curve(traj, [OracleReward()])
 >>> list(rows[0]), len(rows)
@@ -22,7 +22,12 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from zsrm.rewards.reward_model import RewardModel, check_goal
+from zsrm.envs.rollout import episode_steps, make_env
+from zsrm.envs.scripted import scripted_controller
+from zsrm.evaluation.plots import pyplot, save_figure
+from zsrm.rewards.interface import RewardModel, check_goal
+
+FIGURE5_GOAL = "a yellow puck close to a blue puck"
 
 
 @dataclass
@@ -50,28 +55,20 @@ class Trajectory:
 def record_trajectory(goal: str, cameras: Sequence[str] = ("tilted",), steps: int = 30, seed: int = 0,
                       image_size: int = 64) -> Trajectory:
     """Run the scene's scripted controller for ``goal`` and keep every frame and info."""
-    from zsrm.envs.commands import make_env
-    from zsrm.envs.scripted import scripted_controller
-
     goal = check_goal(goal)
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
     env = make_env(goal, cameras=tuple(cameras), image_size=image_size)
-    obs, info = env.reset(seed=seed)
+    frames, infos = [], []
     try:
-        controller = scripted_controller(env)
+        for _, obs, info, _ in episode_steps(env, scripted_controller, seed, max_steps=steps):
+            frames.append(obs)
+            infos.append(info)
     except (TypeError, NotImplementedError) as err:
-        env.close()
         raise ValueError(f"no scripted trajectory for {goal!r}: {err}") from None
-    frames, infos = [obs], [info]
-    for _ in range(steps):
-        obs, _, terminated, truncated, info = env.step(controller())
-        frames.append(obs)
-        infos.append(info)
-        if terminated or truncated:
-            break
+    finally:
+        env.close()
     task = env.unwrapped.task
-    env.close()
     observations = {c: np.stack([f[c] for f in frames]) for c in frames[0]}
     return Trajectory(goal, observations, infos, seed, tuple(task.objects) if task else ())
 
@@ -152,10 +149,7 @@ def plot_curve(rows: list[dict], trajectory: Trajectory, path: str | Path, camer
                title: str | None = None, n_frames: int = 8) -> Path:
     """Each reward vs frame (one panel per model, the distance dashed on a second axis, frames
     where the oracle says the goal holds shaded), above a strip of frames."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     camera = camera or next(iter(trajectory.observations))
     frames = trajectory.observations[camera]
@@ -193,9 +187,4 @@ def plot_curve(rows: list[dict], trajectory: Trajectory, path: str | Path, camer
         ax.imshow(frames[t])
         ax.set_title(f"frame {t}", fontsize=8)
         ax.axis("off")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

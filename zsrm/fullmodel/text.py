@@ -17,10 +17,17 @@ tensor([1., 1.])
 """
 from __future__ import annotations
 
+import os
 from functools import lru_cache
+from pathlib import Path
 
 import torch
 from torch import nn
+
+from zsrm.tasks.language import GoalError, parse_goal
+from zsrm.tasks.negatives import complement_of
+from zsrm.vlm.base import VisionLanguageModel
+from zsrm.vlm.factory import load_vlm
 
 
 class TextWhitener(nn.Module):
@@ -55,9 +62,6 @@ class TextWhitener(nn.Module):
 def noun_phrases(text: str) -> tuple[str, ...]:
     """The object phrases of a caption or goal, in order ("red block", "blue block"); () if the
     text is not one zsrm reads."""
-    from zsrm.reward_model.negatives import complement_of
-    from zsrm.tasks.language import GoalError, parse_goal
-
     denied = complement_of(text)
     if denied is not None:
         return denied.phrases
@@ -104,3 +108,25 @@ class RoleTextFeatures(nn.Module):
             i, k, j = (torch.tensor(v, device=sentence.device) for v in zip(*rows))
             slots = slots.index_put((i, k), p[j])
         return torch.cat(out + [slots.flatten(1)], dim=1)
+
+
+def load_frozen_reference(spec: str, device, what: str) -> VisionLanguageModel:
+    """The VLM a saved model reads texts through, loaded from its spec (FileNotFoundError saying
+    which model needs it if it does not load)."""
+    try:
+        return load_vlm(spec, device=device)
+    except (FileNotFoundError, ValueError) as err:
+        raise FileNotFoundError(f"{what} the VLM {spec!r}, which does not load: {err}") from None
+
+
+def portable_spec(spec: str, folder: str | Path) -> tuple[str, bool]:
+    """(how a model saved in ``folder`` records the VLM ``spec`` it reads texts through, whether
+    that is a folder): a folder is recorded relative to ``folder``, so both move together."""
+    if not Path(spec).is_dir():
+        return spec, False
+    return os.path.relpath(Path(spec).resolve(), Path(folder).resolve()), True
+
+
+def stored_spec(spec: str, is_folder: bool, folder: str | Path) -> str:
+    """The spec :func:`portable_spec` recorded, usable from anywhere again."""
+    return str((Path(folder) / spec).resolve()) if is_folder else spec

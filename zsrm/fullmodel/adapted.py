@@ -11,7 +11,7 @@ added, each starting at zero, so that before training the model *is* the VLM:
   holds gives "a yellow block on the left of a red block", "... on the right of ..." and "a red
   block on the left of a yellow block" nearly the same embedding; the text adapter adds an MLP
   of the whitened sentence embedding and the embeddings of its object phrases in order
-  (:class:`~zsrm.reward_model.text.RoleTextFeatures`), whitened on the training captions. Its
+  (:class:`~zsrm.fullmodel.text.RoleTextFeatures`), whitened on the training captions. Its
   input comes from a frozen copy of the VLM as it was before fine-tuning (``reference``,
   loaded again from its spec, not saved): whitening magnifies small directions of the
   embedding, and reading them off the text tower being trained would feed the adapter a
@@ -27,18 +27,17 @@ True
 """
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
 
 import torch
 from torch import nn
 
-from zsrm.reward_model.text import RoleTextFeatures
+from zsrm.fullmodel.text import RoleTextFeatures, load_frozen_reference, portable_spec, stored_spec
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel
+from zsrm.vlm.registry import load_folder, load_weights, read_config, register_kind, save_folder
+from zsrm.vlm.text_cache import TextEmbeddingCache
 
 BACKEND = "zsrm-adapted"
-CONFIG_FILE = "config.json"
 ADAPTERS_FILE = "adapters.safetensors"
 
 
@@ -68,7 +67,7 @@ class AdaptedVLM(VisionLanguageModel):
             # Frozen and kept out of this module's parameters and weights (loaded from its spec).
             self.__dict__["reference"] = reference.eval().requires_grad_(False)
             self.reference_spec = str(reference_spec)
-            self._reference_cache: dict[str, torch.Tensor] = {}
+            self._reference_cache = TextEmbeddingCache(lambda t: self.reference.encode_text_tokens(t).float().cpu())
             with torch.no_grad():
                 text_dim = reference.encode_text_tokens(["a red block on the left of a blue block"]).shape[-1]
             self.text_norm = RoleTextFeatures(text_dim)
@@ -121,11 +120,7 @@ class AdaptedVLM(VisionLanguageModel):
 
     def reference_texts(self, texts: list[str]) -> torch.Tensor:
         """The frozen reference VLM's text embeddings, computed once per text."""
-        missing = list(dict.fromkeys(t for t in texts if t not in self._reference_cache))
-        if missing:
-            with torch.no_grad():
-                self._reference_cache.update(zip(missing, self.reference.encode_text_tokens(missing).float().cpu()))
-        return torch.stack([self._reference_cache[t] for t in texts]).to(self._device)
+        return self._reference_cache(texts).to(self._device)
 
     @property
     def _device(self) -> torch.device:
@@ -137,49 +132,30 @@ class AdaptedVLM(VisionLanguageModel):
             self.text_norm.fit(self.reference_texts, list(texts))
 
     # --- persistence: the base VLM in its own format in base/, the read-out beside it ----
-    def save(self, folder: str | Path) -> None:
-        from safetensors.torch import save_model
+    def _adapters(self) -> nn.ModuleDict:
+        return nn.ModuleDict({k: m for k, m in (("spatial", self.spatial), ("text_norm", self.text_norm),
+                                                ("text_adapter", self.text_adapter)) if m is not None})
 
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        self.base.save(folder / "base")
-        adapters = nn.ModuleDict({k: m for k, m in (("spatial", self.spatial), ("text_norm", self.text_norm),
-                                                    ("text_adapter", self.text_adapter)) if m is not None})
-        save_model(adapters, str(folder / ADAPTERS_FILE))
+    def save(self, folder: str | Path) -> None:
+        self.base.save(Path(folder) / "base")
         config = {"backend": BACKEND, "grid": self.grid, "text_hidden": self.text_hidden,
                   "base_backend": self.base.backend, "meta": self.meta}
         if self.text_hidden:
-            spec, is_folder = self.reference_spec, Path(self.reference_spec).is_dir()
-            if is_folder:  # a folder moves with this one when both move together
-                spec = os.path.relpath(Path(spec).resolve(), folder.resolve())
+            spec, is_folder = portable_spec(self.reference_spec, folder)
             config.update(reference=spec, reference_is_folder=is_folder)
-        (folder / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
+        save_folder(folder, config, {ADAPTERS_FILE: self._adapters()})
 
     @classmethod
     def from_folder(cls, folder: str | Path, device: str | torch.device = "cpu") -> "AdaptedVLM":
-        from safetensors.torch import load_model
-
-        from zsrm.vlm.factory import load_folder
-
-        from zsrm.reward_model.student import load_reward_backbone
-
-        folder = Path(folder)
-        cfg = json.loads((folder / CONFIG_FILE).read_text())
-        if cfg.get("backend") != BACKEND:
-            raise ValueError(f"{folder} holds a {cfg.get('backend')!r} model, not an adapted VLM")
+        cfg = read_config(folder, kind=BACKEND)
         reference = spec = None
         if cfg["text_hidden"]:
-            spec = str((folder / cfg["reference"]).resolve()) if cfg.get("reference_is_folder") else cfg["reference"]
-            try:
-                reference = load_reward_backbone(spec, device)
-            except (FileNotFoundError, ValueError) as err:
-                raise FileNotFoundError(f"the model in {folder} reads texts through the VLM {spec!r}, "
-                                        f"which does not load: {err}") from None
-        model = cls(load_folder(folder / "base", device), grid=cfg["grid"], text_hidden=cfg["text_hidden"],
+            spec = stored_spec(cfg["reference"], cfg.get("reference_is_folder", False), folder)
+            reference = load_frozen_reference(spec, device, f"the model in {folder} reads texts through")
+        model = cls(load_folder(Path(folder) / "base", device), grid=cfg["grid"], text_hidden=cfg["text_hidden"],
                     reference=reference, reference_spec=spec, meta=cfg.get("meta"))
-        if not (folder / ADAPTERS_FILE).is_file():
-            raise FileNotFoundError(f"no {ADAPTERS_FILE} in {folder}")
-        adapters = nn.ModuleDict({k: m for k, m in (("spatial", model.spatial), ("text_norm", model.text_norm),
-                                                    ("text_adapter", model.text_adapter)) if m is not None})
-        load_model(adapters, str(folder / ADAPTERS_FILE), strict=True, device=str(device))
+        load_weights(model._adapters(), folder, ADAPTERS_FILE, device=device)
         return model.to(device).eval()
+
+
+register_kind(BACKEND, AdaptedVLM.from_folder)

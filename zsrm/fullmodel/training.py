@@ -4,14 +4,14 @@ Two models train with the same loop:
 
 * the fine-tuned VLM (default): starts from a VLM (``scene``, ``open_clip:RN50``, a folder)
   and trains both towers, with two zero-initialised adapters for where things are and who is
-  where in the sentence (:mod:`zsrm.reward_model.adapted`);
+  where in the sentence (:mod:`zsrm.fullmodel.adapted`);
 * the student (``student=True``): a small CNN from scratch whose text side is the VLM's
-  frozen text embeddings through an MLP (:mod:`zsrm.reward_model.student`).
+  frozen text embeddings through an MLP (:mod:`zsrm.fullmodel.student`).
 
 The loss is the multi-positive contrastive loss of :mod:`zsrm.vlm.losses` (identical captions
 in a batch are positives of each other, not negatives) plus, with weight
 ``hard_negative_weight``, the loss of the reward's own decision: each image's caption against
-its task's negative texts (:mod:`zsrm.reward_model.negatives`), leaving out negatives that the
+its task's negative texts (:mod:`zsrm.tasks.negatives`), leaving out negatives that the
 labeler also found true for that image.
 
 Resumable: the weights, optimizer and step are checkpointed in ``WORKDIR/checkpoint``; running
@@ -26,15 +26,18 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Literal, Sequence
 
 import numpy as np
 import torch
 from torch import nn
 
-from zsrm.reward_model.negatives import candidate_texts
-from zsrm.reward_model.pairs import CaptionedImages, caption_relation
+from zsrm.fullmodel.adapted import AdaptedVLM
+from zsrm.fullmodel.pairs import CaptionedImages, caption_relation
+from zsrm.fullmodel.student import StudentConfig, StudentRewardNet
+from zsrm.tasks.negatives import candidate_texts
 from zsrm.vlm.base import VisionLanguageModel
+from zsrm.vlm.factory import load_vlm
 from zsrm.vlm.losses import multi_positive_contrastive_loss
 from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
 
@@ -46,29 +49,31 @@ STUDENT_PRESETS = {
 
 @dataclass
 class FinetuneConfig:
-    data: str = "data/zsrm/explore"  # written by benchmarks/reward_data.py, or zsrm collect + zsrm label
-    labels: str = "labels"  # the labels folder inside it (Grad-CAM captions are read, nothing else)
-    out: str = "runs/zsrm/vlm"  # where the trained model is saved
-    workdir: str = ""  # checkpoint and log; default OUT.work
-    vlm: str = "scene"  # the VLM to start from (or, for the student, whose text tower it uses)
-    student: bool = False
-    student_arch: str = "default"  # a key of STUDENT_PRESETS
-    spatial_grid: int = 4  # position-aware read-out added to the VLM's image head (0: none)
-    text_adapter: int = 256  # hidden units of the whitened-text read-out added to its text tower (0: none)
-    steps: int = 1500
-    batch_size: int = 128
-    lr: float = 1e-3
-    weight_decay: float = 0.05
-    warmup_steps: int = 100
-    hard_negative_weight: float = 1.0
-    balance: float = 1.0  # 1: each relation drawn equally often; 0: pairs drawn uniformly
+    """Train the full reward model on labelled pairs (CLIP-style), or the student."""
+
+    data: str = "data/zsrm/explore"  # dataset folder of zsrm reward-data (the default), or of zsrm collect + zsrm label
+    labels: str = "labels"  # labels folder inside the dataset (only its Grad-CAM captions are read)
+    out: str = ""  # model folder (default runs/zsrm/vlm, or runs/zsrm/student with --student)
+    workdir: str = ""  # checkpoint and log folder (default OUT.work)
+    vlm: str = "scene"  # VLM to start from (scene, open_clip:RN50, a folder); with --student, the VLM whose text tower embeds the goal texts
+    student: bool = False  # train the small student network from scratch
+    student_arch: Literal["default", "tiny"] = "default"  # the student's architecture (STUDENT_PRESETS)
+    spatial_grid: int = 4  # grid of the position-aware read-out added to the VLM's image head (0: none)
+    text_adapter: int = 256  # hidden units of the whitened-text read-out added to the VLM's text tower (0: none)
+    steps: int = 1500  # optimizer steps
+    batch_size: int = 128  # pairs per step
+    lr: float = 1e-3  # peak learning rate
+    weight_decay: float = 0.05  # AdamW weight decay of weight matrices
+    warmup_steps: int = 100  # linear warmup steps before the cosine decay
+    hard_negative_weight: float = 1.0  # weight of the caption-vs-negative-texts loss (0: the plain contrastive loss)
+    balance: float = 1.0  # 1 draws each relation equally often, 0 pairs uniformly
     shift: int = 2  # random translation of the images by up to this many pixels
-    val_fraction: float = 0.1
-    seed: int = 0
-    checkpoint_every: int = 100
-    eval_every: int = 500
-    val_pairs: int = 2000  # validation pairs scored at each evaluation
-    threads: int = 0  # torch threads; 0 keeps torch's default
+    val_fraction: float = 0.1  # share of the exploration episodes held out for validation
+    seed: int = 0  # seed of the split, the initial weights and every batch
+    checkpoint_every: int = 100  # steps between checkpoints
+    eval_every: int = 500  # steps between validations
+    val_pairs: int = 2000  # validation pairs scored at each validation
+    threads: int = 0  # torch threads (0: torch's default)
 
     # Settings that define the run: a checkpoint made with others cannot be resumed.
     IDENTITY = ("data", "labels", "vlm", "student", "student_arch", "spatial_grid", "text_adapter", "steps", "batch_size", "lr", "weight_decay",
@@ -88,6 +93,8 @@ class FinetuneConfig:
             raise ValueError(f"lr must be > 0, got {self.lr}")
         if self.weight_decay < 0 or self.hard_negative_weight < 0 or self.shift < 0:
             raise ValueError("weight_decay, hard_negative_weight and shift must be >= 0")
+        if not self.out:
+            self.out = "runs/zsrm/student" if self.student else "runs/zsrm/vlm"
         if not self.workdir:
             self.workdir = str(Path(self.out).with_name(Path(self.out).name + ".work"))
 
@@ -98,17 +105,14 @@ class FinetuneConfig:
 # --- model -------------------------------------------------------------------------------------
 def initial_model(cfg: FinetuneConfig) -> VisionLanguageModel:
     """The model before training: the VLM with zero-initialised image and text adapters (see
-    :mod:`zsrm.reward_model.adapted`), or a fresh student on the VLM's text tower."""
-    from zsrm.reward_model.adapted import AdaptedVLM
-    from zsrm.reward_model.student import StudentConfig, StudentRewardNet, load_reward_backbone
-
+    :mod:`zsrm.fullmodel.adapted`), or a fresh student on the VLM's text tower."""
     torch.manual_seed(cfg.seed)
-    vlm = load_reward_backbone(cfg.vlm)
+    vlm = load_vlm(cfg.vlm)
     if cfg.student:
         return StudentRewardNet(StudentConfig(**STUDENT_PRESETS[cfg.student_arch]), vlm, cfg.vlm)
     if (cfg.spatial_grid or cfg.text_adapter) and not isinstance(vlm, (AdaptedVLM, StudentRewardNet)):
         # The text adapter reads a frozen copy of the VLM as it was: load it a second time.
-        reference = load_reward_backbone(cfg.vlm) if cfg.text_adapter else None
+        reference = load_vlm(cfg.vlm) if cfg.text_adapter else None
         return AdaptedVLM(vlm, cfg.spatial_grid, cfg.text_adapter, reference=reference, reference_spec=cfg.vlm)
     return vlm
 
@@ -240,12 +244,9 @@ def finetune(cfg: FinetuneConfig, data: CaptionedImages | None = None, model: Vi
     (default: :func:`initial_model`). A resumed run must be given the same initial model, as
     the checkpoint holds its trained weights, not how to build it.
     """
-    from tqdm import tqdm
-
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
-    work, out = Path(cfg.workdir), Path(cfg.out)
-    ckpt = work / "checkpoint"
+    work = Path(cfg.workdir)
     if fresh:
         shutil.rmtree(work, ignore_errors=True)
     if data is None:
@@ -253,7 +254,6 @@ def finetune(cfg: FinetuneConfig, data: CaptionedImages | None = None, model: Vi
     train, val = data.split(cfg.val_fraction, cfg.seed)
     if train.n_pairs == 0:
         raise ValueError("no training pairs: the labels hold no caption for the cameras of the data")
-    weights = train.sampling_weights(cfg.balance)
     model = model if model is not None else initial_model(cfg)
     model.train()
     opt = _optimizer(model, cfg)
@@ -261,14 +261,24 @@ def finetune(cfg: FinetuneConfig, data: CaptionedImages | None = None, model: Vi
     fit = getattr(model, "fit_text_statistics", None)
     if callable(fit):  # statistics of the training captions and their negatives (restored on resume)
         fit(train.vocabulary())
-    if (ckpt / "state.json").exists():
-        start, log = _load_checkpoint(ckpt, model, opt, cfg)
+    if (work / "checkpoint" / "state.json").exists():
+        start, log = _load_checkpoint(work / "checkpoint", model, opt, cfg)
         if progress:
-            print(f"resuming from {ckpt} at step {start}/{cfg.steps}")
+            print(f"resuming from {work / 'checkpoint'} at step {start}/{cfg.steps}")
     work.mkdir(parents=True, exist_ok=True)
+    _train_steps(cfg, model, opt, train, val, start, log, progress)
+    _save_trained(cfg, model, train, val, log)
+    return model
 
-    elapsed_before = log[-1]["seconds"] if log else 0.0
-    t0 = time.time()
+
+def _train_steps(cfg: FinetuneConfig, model, opt, train: CaptionedImages, val: CaptionedImages, start: int,
+                 log: list[dict], progress: bool) -> None:
+    """Steps ``start`` to ``cfg.steps``: a batch of (seed, step), a log entry every 25 steps,
+    validation every ``eval_every``, a checkpoint every ``checkpoint_every``."""
+    from tqdm import tqdm
+
+    weights = train.sampling_weights(cfg.balance)
+    elapsed_before, t0 = (log[-1]["seconds"] if log else 0.0), time.time()
     bar = tqdm(total=cfg.steps, initial=start, desc="train student" if cfg.student else "fine-tune VLM",
                unit="step", disable=not progress)
     for step in range(start, cfg.steps):
@@ -277,29 +287,33 @@ def finetune(cfg: FinetuneConfig, data: CaptionedImages | None = None, model: Vi
         rng = np.random.default_rng([cfg.seed, 11, step])
         idx = rng.choice(train.n_pairs, cfg.batch_size, p=weights)
         images = shift_images(train.pair_images(idx), cfg.shift, rng)
-        captions = train.pair_texts(idx)
-        loss, parts = batch_loss(model, images, captions, [train.holds(i) for i in idx], cfg.hard_negative_weight)
+        loss, parts = batch_loss(model, images, train.pair_texts(idx), [train.holds(i) for i in idx],
+                                 cfg.hard_negative_weight)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
         bar.update(1)
         bar.set_postfix(loss=f"{loss.item():.3f}", temp=f"{model.logit_scale.exp().item():.1f}")
+        seconds = round(elapsed_before + time.time() - t0, 1)
         entry = None
         if (step + 1) % 25 == 0 or step + 1 == cfg.steps:
             entry = {"step": step + 1, "loss": round(loss.item(), 5), **{k: round(v, 5) for k, v in parts.items()},
-                     "seconds": round(elapsed_before + time.time() - t0, 1)}
+                     "seconds": seconds}
         if val.n_pairs and ((step + 1) % cfg.eval_every == 0 or step + 1 == cfg.steps):
             res = evaluate_pairs(model, val, cfg.val_pairs, cfg.batch_size, cfg.seed)
-            entry = entry or {"step": step + 1, "seconds": round(elapsed_before + time.time() - t0, 1)}
+            entry = entry or {"step": step + 1, "seconds": seconds}
             entry.update(val_loss=round(res["loss"], 5), val_argmax_accuracy=round(res["argmax_accuracy"], 4))
             bar.write(f"step {step + 1}: validation loss {res['loss']:.3f}, "
                       f"caption beats its negatives on {100 * res['argmax_accuracy']:.1f}% of held-out pairs")
         if entry:
             log.append(entry)
         if (step + 1) % cfg.checkpoint_every == 0 or step + 1 == cfg.steps:
-            _save_checkpoint(ckpt, model, opt, step + 1, cfg, log)
+            _save_checkpoint(Path(cfg.workdir) / "checkpoint", model, opt, step + 1, cfg, log)
     bar.close()
 
+
+def _save_trained(cfg: FinetuneConfig, model, train: CaptionedImages, val: CaptionedImages, log: list[dict]) -> None:
+    """The final validation, the model in ``cfg.out`` with its training summary, the log as CSV."""
     model.eval()
     final_val = evaluate_pairs(model, val, cfg.val_pairs, cfg.batch_size, cfg.seed) if val.n_pairs else {}
     summary = {
@@ -313,19 +327,14 @@ def finetune(cfg: FinetuneConfig, data: CaptionedImages | None = None, model: Vi
     }
     if isinstance(getattr(model, "meta", None), dict):
         model.meta = {**model.meta, "zsrm_finetune": summary}
+    out = Path(cfg.out)
     model.save(out)
     (out / "training.json").write_text(json.dumps(summary, indent=1) + "\n")
     keys = list(dict.fromkeys(k for row in log for k in row))
-    with open(work / "log.csv", "w", newline="") as f:
+    with open(Path(cfg.workdir) / "log.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=keys)
         writer.writeheader()
         writer.writerows(log)
-    return model
-
-
-def config_from_args(args) -> FinetuneConfig:
-    fields = FinetuneConfig.__dataclass_fields__
-    return FinetuneConfig(**{k: getattr(args, k) for k in fields if getattr(args, k, None) is not None})
 
 
 __all__ = ["FinetuneConfig", "finetune", "batch_loss", "evaluate_pairs", "initial_model", "learning_rate",

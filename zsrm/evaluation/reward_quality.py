@@ -18,10 +18,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from zsrm.tasks.catalogue import SINGLE_TASKS
+from zsrm.envs.rollout import episode_steps, make_env, random_policy
+from zsrm.envs.scripted import scripted_controller
+from zsrm.evaluation.metrics import auroc, best_threshold_f1, binary_metrics
+from zsrm.tasks.catalogue import REPORT_TASKS, SINGLE_TASKS
 from zsrm.tasks.relations import RELATIONS
 
-EVAL_TASKS = ("stack", "place_left", "place_right", "push_close")
+EVAL_TASKS = REPORT_TASKS
+POLICIES = {"scripted": scripted_controller, "random": random_policy}
 
 
 @dataclass
@@ -61,9 +65,6 @@ def rollout_frames(task: str, scripted_episodes: int = 10, random_episodes: int 
     """
     from tqdm import tqdm
 
-    from zsrm.envs.commands import make_env
-    from zsrm.envs.scripted import scripted_controller
-
     if scripted_episodes < 0 or random_episodes < 0 or scripted_episodes + random_episodes == 0:
         raise ValueError("need at least one episode (scripted or random)")
     if every < 1:
@@ -76,58 +77,17 @@ def rollout_frames(task: str, scripted_episodes: int = 10, random_episodes: int 
     plan += [("random", seed + scripted_episodes + i) for i in range(random_episodes)]
     try:
         for kind, ep_seed in tqdm(plan, desc=f"eval frames {task}", unit="episode", disable=not progress):
-            obs, info = env.reset(seed=ep_seed)
-            env.action_space.seed(ep_seed)
-            policy = scripted_controller(env) if kind == "scripted" else env.action_space.sample
-            t = 0
-            while True:
-                if t % every == 0:
+            for t, obs, info, done in episode_steps(env, POLICIES[kind], ep_seed):
+                if not done and t % every == 0:  # the frames an agent acts on: not the final one
                     images.append(obs[camera])
                     success.append(bool(info["is_success"]))
                     source.append(kind)
                     episodes.append(ep_seed)
                     steps.append(t)
-                obs, _, terminated, truncated, info = env.step(policy())
-                t += 1
-                if terminated or truncated:
-                    break
     finally:
         env.close()
     return EvalFrames(task, entry.goal, camera, np.stack(images), np.array(success), np.array(source),
                       np.array(episodes), np.array(steps))
-
-
-def binary_metrics(predicted, truth) -> dict:
-    """Precision, recall and F1 of binary predictions (0 where undefined), and the counts."""
-    p, t = np.asarray(predicted, bool), np.asarray(truth, bool)
-    tp, fp, fn = int((p & t).sum()), int((p & ~t).sum()), int((~p & t).sum())
-    precision = tp / (tp + fp) if tp + fp else 0.0
-    recall = tp / (tp + fn) if tp + fn else 0.0
-    f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
-    return {"precision": precision, "recall": recall, "f1": f1, "accuracy": float((p == t).mean()),
-            "predicted_positive": int(p.sum())}
-
-
-def auroc(scores, truth) -> float:
-    """Area under the ROC curve; NaN when only one class is present."""
-    from sklearn.metrics import roc_auc_score
-
-    t = np.asarray(truth, bool)
-    if t.all() or not t.any():
-        return float("nan")
-    return float(roc_auc_score(t, np.asarray(scores, np.float64)))
-
-
-def best_threshold_f1(scores, truth) -> float:
-    """The highest F1 of ``scores > threshold`` over all thresholds (privileged: uses the labels)."""
-    from sklearn.metrics import precision_recall_curve
-
-    t = np.asarray(truth, bool)
-    if not t.any():
-        return float("nan")
-    precision, recall, _ = precision_recall_curve(t, np.asarray(scores, np.float64))
-    f1 = np.where(precision + recall > 0, 2 * precision * recall / np.maximum(precision + recall, 1e-12), 0.0)
-    return float(f1.max())
 
 
 def reward_metrics(binary, raw, margin, truth) -> dict:
@@ -138,10 +98,8 @@ def reward_metrics(binary, raw, margin, truth) -> dict:
 
 
 def score_frames(reward, frames: EvalFrames) -> dict[str, np.ndarray]:
-    """Binary, raw and margin outputs of a :class:`~zsrm.rewards.zsrm.ZSRMReward` on the frames."""
-    sims = reward.similarities(frames.images, frames.goal)
-    return {"binary": (sims.argmax(axis=1) == 0).astype(np.float32), "raw": sims[:, 0],
-            "margin": sims[:, 0] - sims[:, 1:].max(axis=1)}
+    """Binary, raw and margin outputs of a :class:`~zsrm.rewards.binarised.ZSRMReward` on the frames."""
+    return reward.outputs(frames.images, frames.goal)
 
 
 def evaluate_rewards(models: dict, frames_by_task: dict[str, EvalFrames], raw_scores: dict | None = None) -> dict:
@@ -173,7 +131,7 @@ def write_curves(task: str, models: dict, folder, steps: int = 80, seed: int = 0
     ``FOLDER/<task>.csv`` and ``FOLDER/<task>.png``."""
     from pathlib import Path
 
-    from zsrm.rewards.curve import plot_curve, record_trajectory, reward_curve, write_csv
+    from zsrm.evaluation.curves import plot_curve, record_trajectory, reward_curve, write_csv
 
     entry = _entry(task)
     camera = task_camera(task)

@@ -9,11 +9,15 @@ from __future__ import annotations
 
 import csv
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from zsrm.envs.commands import REPORT_TASKS, camera_strip, make_env, run_episode
+from zsrm.envs.rollout import camera_strip, episode_steps, make_env, random_policy, run_episode
+from zsrm.envs.scripted import scripted_controller
+from zsrm.evaluation.plots import pyplot, save_figure
+from zsrm.tasks.catalogue import REPORT_TASKS
 
 SCENES = {"tabletop": "stack", "pushing": "push_close", "pendulum": "pendulum"}
 
@@ -50,14 +54,7 @@ def write_random_gifs(out: Path, steps: int = 40, size: int = 64) -> list[Path]:
     paths = []
     for scene, task in SCENES.items():
         env = make_env(task, image_size=size)
-        env.action_space.seed(0)
-        env.reset(seed=0)
-        frames = []
-        for _ in range(steps):
-            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            frames.append(camera_strip(env, size))
-            if terminated or truncated:
-                break
+        frames = [camera_strip(env, size) for t, *_ in episode_steps(env, random_policy, seed=0, max_steps=steps) if t]
         env.close()
         path = out / f"random_episode_{scene}.gif"
         iio.imwrite(path, np.stack(frames), duration=80, loop=0)
@@ -69,18 +66,11 @@ def policy_table(episodes: int) -> list[dict]:
     """Oracle metrics of a random and a scripted policy on the report tasks."""
     from tqdm import tqdm
 
-    from zsrm.envs.scripted import scripted_controller
-
     rows = []
     for task in tqdm(REPORT_TASKS, desc="policies"):
         env = make_env(task)
-        for name in ("random", "scripted"):
-            results = []
-            for seed in range(episodes):
-                env.reset(seed=seed)
-                env.action_space.seed(seed)
-                policy = scripted_controller(env) if name == "scripted" else env.action_space.sample
-                results.append(run_episode(env, policy, seed=seed))
+        for name, policy in (("random", random_policy), ("scripted", scripted_controller)):
+            results = [run_episode(env, policy, seed=seed) for seed in range(episodes)]
             rows.append({
                 "task": task,
                 "goal": str(env.unwrapped.task),
@@ -94,10 +84,7 @@ def policy_table(episodes: int) -> list[dict]:
 
 
 def plot_policy_table(rows: list[dict], path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     tasks = list(dict.fromkeys(r["task"] for r in rows))
     fig, ax = plt.subplots(figsize=(6, 3.2))
@@ -108,10 +95,7 @@ def plot_policy_table(rows: list[dict], path: Path) -> Path:
     ax.set_xticks(np.arange(len(tasks)), tasks)
     ax.set_ylabel("steps in goal per 100-step episode\n(oracle metric)")
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 REWARD_CURVES = {  # goal -> the camera its relation is read from
@@ -123,9 +107,9 @@ REWARD_CURVES = {  # goal -> the camera its relation is read from
 def write_reward_curves(out: Path, vlm_spec: str = "scene", zsrm_spec: str = "student") -> tuple[list[Path], list[dict]]:
     """Base reward (paper 2.1) and the binarised ZSRM reward (paper 2.2, the shipped student)
     along scripted trajectories: CSV + PNG per goal, and how often each agrees with the oracle."""
-    from zsrm.reward_model.student import load_reward_backbone
+    from zsrm.evaluation.curves import plot_curve, record_trajectory, reward_curve, write_csv
+    from zsrm.fullmodel import load_reward_backbone
     from zsrm.rewards import BaseReward, OracleReward, ZSRMReward
-    from zsrm.rewards.curve import plot_curve, record_trajectory, reward_curve, write_csv
     from zsrm.vlm import load_vlm
 
     vlm = load_vlm(vlm_spec)
@@ -170,8 +154,13 @@ def run_demo(out: Path, episodes: int = 5) -> Path:
     return out
 
 
-def add_command(sub):
-    p = sub.add_parser("demo", help="the offline main job: scenes, episodes and a report folder")
-    p.add_argument("--out", default="reports/demo", help="report folder (default reports/demo)")
-    p.add_argument("--episodes", type=int, default=5, help="episodes per task and policy for the table")
-    p.set_defaults(func=lambda args: run_demo(Path(args.out), episodes=args.episodes) and 0)
+@dataclass
+class Demo:
+    """The offline main job: scenes, episodes and a report folder."""
+
+    out: str = "reports/demo"  # report folder
+    episodes: int = 5  # episodes per task and policy for the table
+
+    def run(self) -> int:
+        run_demo(Path(self.out), episodes=self.episodes)
+        return 0

@@ -18,12 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from zsrm.data.collect import SHAPE_OF
 from zsrm.data.dataset import LABELS, ExplorationData
 from zsrm.data.shards import load_npz, read_manifest
-from zsrm.grounding.annotate import LabelConfig, labelers
+from zsrm.envs.cameras import apply_homography
+from zsrm.evaluation.metrics import auroc
+from zsrm.evaluation.plots import pyplot, save_figure
+from zsrm.grounding.annotate import Grounder, LabelConfig, labelers
 from zsrm.grounding.gradcam import grid_centres, locate
-from zsrm.grounding.labeler import RelationTable, world_table
+from zsrm.grounding.labeler import RelationTable, object_tuples, pixel_thresholds, world_table
+from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import RELATIONS
 
@@ -67,22 +70,6 @@ def _wrong_object(xy: np.ndarray, truth: np.ndarray, present: np.ndarray) -> flo
     return float((nearest != np.arange(len(COLOURS))[None])[ok].mean()) if ok.any() else float("nan")
 
 
-def auroc(positive: np.ndarray, negative: np.ndarray) -> float | None:
-    """Probability that a random positive scores above a random negative (ties count half)."""
-    positive, negative = positive[np.isfinite(positive)], negative[np.isfinite(negative)]
-    if not len(positive) or not len(negative):
-        return None
-    scores = np.concatenate([positive, negative])
-    order = scores.argsort(kind="mergesort")
-    ranks = np.empty(len(scores))
-    ranks[order] = np.arange(1, len(scores) + 1)
-    for v in np.unique(scores):  # average ranks of ties
-        tie = scores == v
-        ranks[tie] = ranks[tie].mean()
-    u = ranks[: len(positive)].sum() - len(positive) * (len(positive) + 1) / 2
-    return float(u / (len(positive) * len(negative)))
-
-
 def prf(pred: RelationTable, truth: RelationTable) -> dict[str, dict]:
     """Precision, recall, F1 and support (true positives in ``truth``) per relation, over all
     (image, ordered object tuple) pairs. Undefined ratios are None."""
@@ -114,8 +101,6 @@ def _tables(data, cfg, pixels: dict, present, scene_index, world: bool = False, 
 
 
 def _tuples(relation: str) -> np.ndarray:
-    from zsrm.grounding.labeler import object_tuples
-
     return object_tuples(RELATIONS[relation].arity, len(COLOURS))
 
 
@@ -126,13 +111,39 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
     cfg = LabelConfig(**manifest["config"])
     arr = data.load(["positions", "present", "scene"] + [f"pixels_{c}" for c in data.cameras])
     present, scene_index = arr["present"], arr["scene"]
-    size = data.config["image_size"]
     scene0 = data.scenes[0]
-    widths = np.array([[data.block_width_px[s][c] for c in data.cameras] for s in data.scenes])[scene_index]
+    report = _localisation(data, lab, arr)
+    pixels = {c: lab[f"gradcam_xy_{c}"] for c in data.cameras}
+    truth_pixels = {c: arr[f"pixels_{c}"] for c in data.cameras}
+    truth_table = _tables(data, cfg, truth_pixels, present, scene_index)
+    world = _tables(data, cfg, None, present, scene_index, world=True, positions=arr["positions"])
+    pred = _tables(data, cfg, pixels, present, scene_index)
+    vs_pixel, vs_world = prf(pred, truth_table), prf(pred, world)
+    for key, of in (("f1", "f1"), ("precision", "precision"), ("recall", "recall"), ("support", "support")):
+        report[key] = {r: v[of] for r, v in vs_pixel.items()}
+    report["f1_vs_world"] = {r: v["f1"] for r, v in vs_world.items()}
+    report["support_world"] = {r: v["support"] for r, v in vs_world.items()}
+    report["f1_true_pixels_vs_world"] = {r: v["f1"] for r, v in prf(truth_table, world).items()}
+    report["relations"] = {"vs_true_pixels": vs_pixel, "vs_world": vs_world}
+    report["notes"] = _notes(report)
+    report["meta"] = _meta(data, manifest, list(lab[f"gradcam_map_{data.cameras[-1]}"].shape[-2:]))
+    report["stacked_pairs"] = _stacked_pairs(pixels["front"], truth_pixels["front"], truth_table,
+                                             labelers(data, cfg)[scene0].thresholds["front"])
+    if data.table_homography.get(scene0):
+        report["close_pairs"] = _close_pairs(data, cfg, pixels["tilted"], truth_pixels["tilted"], present, scene_index)
+    report["meta"]["shortfalls"] = _shortfalls(report, cfg, data.block_width_px[scene0],
+                                               set(data.table_homography.get(scene0, {})))
+    return report
 
-    report: dict = {"median_px_error": {}, "p90_px_error": {}, "block_width_px": {}, "median_block_widths": {},
-                    "median_px_error_argmax": {}, "p90_px_error_argmax": {}, "wrong_object_rate": {},
-                    "not_located_rate": {}, "median_px_error_by_colour": {}, "presence_auroc": {}}
+
+def _localisation(data: ExplorationData, lab: dict, arr: dict) -> dict:
+    """Per camera: Grad-CAM's localisation error (also of the paper's plain argmax), wrong-object
+    and not-located rates, and the AUROC of its presence score."""
+    present, size, scene0 = arr["present"], data.config["image_size"], data.scenes[0]
+    widths = np.array([[data.block_width_px[s][c] for c in data.cameras] for s in data.scenes])[arr["scene"]]
+    report: dict = {k: {} for k in ("median_px_error", "p90_px_error", "block_width_px", "median_block_widths",
+                                    "median_px_error_argmax", "p90_px_error_argmax", "wrong_object_rate",
+                                    "not_located_rate", "median_px_error_by_colour", "presence_auroc")}
     for j, cam in enumerate(data.cameras):
         truth = arr[f"pixels_{cam}"].astype(np.float64)
         xy = lab[f"gradcam_xy_{cam}"]
@@ -140,44 +151,28 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
         s = _summary(err)
         report["median_px_error"][cam], report["p90_px_error"][cam] = s["median"], s["p90"]
         report["block_width_px"][cam] = data.block_width_px[scene0][cam]
-        rel = err / widths[:, j:j + 1]
-        report["median_block_widths"][cam] = _summary(rel)["median"]
+        report["median_block_widths"][cam] = _summary(err / widths[:, j:j + 1])["median"]
         report["wrong_object_rate"][cam] = _wrong_object(xy, truth, present)
         report["not_located_rate"][cam] = float(np.isinf(err[present]).mean())
         report["median_px_error_by_colour"][cam] = {
             c: _summary(err[:, i])["median"] for i, c in enumerate(COLOURS) if present[:, i].any()}
         # The paper's state extractor: the argmax cell's geometric centre, from the stored maps.
         maps = lab[f"gradcam_map_{cam}"].astype(np.float32)
-        grid = list(maps.shape[-2:])
         plain = locate(maps, grid_centres(maps.shape[-2:], (size, size)), "argmax")
         s = _summary(_errors(plain, truth, present))
         report["median_px_error_argmax"][cam], report["p90_px_error_argmax"][cam] = s["median"], s["p90"]
         score = lab[f"gradcam_score_{cam}"]
         allowed = np.isfinite(score)
-        report["presence_auroc"][cam] = auroc(score[present & allowed], score[~present & allowed])
+        report["presence_auroc"][cam] = auroc(score[allowed], present[allowed])
+    return report
 
-    pixels = {c: lab[f"gradcam_xy_{c}"] for c in data.cameras}
-    truth_pixels = {c: arr[f"pixels_{c}"] for c in data.cameras}
-    pred = _tables(data, cfg, pixels, present, scene_index)
-    vs_pixel = prf(pred, _tables(data, cfg, truth_pixels, present, scene_index))
-    vs_world = prf(pred, _tables(data, cfg, None, present, scene_index, world=True, positions=arr["positions"]))
-    truth_pixel_vs_world = prf(_tables(data, cfg, truth_pixels, present, scene_index),
-                               _tables(data, cfg, None, present, scene_index, world=True, positions=arr["positions"]))
 
-    report["f1"] = {r: v["f1"] for r, v in vs_pixel.items()}
-    report["precision"] = {r: v["precision"] for r, v in vs_pixel.items()}
-    report["recall"] = {r: v["recall"] for r, v in vs_pixel.items()}
-    report["support"] = {r: v["support"] for r, v in vs_pixel.items()}
-    report["f1_vs_world"] = {r: v["f1"] for r, v in vs_world.items()}
-    report["support_world"] = {r: v["support"] for r, v in vs_world.items()}
-    report["f1_true_pixels_vs_world"] = {r: v["f1"] for r, v in truth_pixel_vs_world.items()}
-    report["relations"] = {"vs_true_pixels": vs_pixel, "vs_world": vs_world}
-    report["notes"] = _notes(report)
-    report["meta"] = {
+def _meta(data: ExplorationData, manifest: dict, grid: list) -> dict:
+    return {
         "images": len(data),
         "scenes": list(data.scenes),
         "cameras": list(data.cameras),
-        "image_size": size,
+        "image_size": data.config["image_size"],
         "gradcam_grid": grid,
         "collect": data.config,
         "label": manifest["config"],
@@ -188,21 +183,11 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
         "px_error": "distance from the Grad-CAM coordinates to the projection of the object's true centre, "
                     "present objects only; *_argmax: the paper's plain argmax cell centre of the same maps",
     }
-    report["stacked_pairs"] = _stacked_pairs(pixels["front"], truth_pixels["front"],
-                                             _tables(data, cfg, truth_pixels, present, scene_index),
-                                             labelers(data, cfg)[scene0].thresholds["front"])
-    if data.table_homography.get(scene0):
-        report["close_pairs"] = _close_pairs(data, cfg, pixels["tilted"], truth_pixels["tilted"], present, scene_index)
-    report["meta"]["shortfalls"] = _shortfalls(report, cfg, data.block_width_px[scene0],
-                                               set(data.table_homography.get(scene0, {})))
-    return report
 
 
 def _close_pairs(data, cfg, xy, truth, present, scene_index) -> dict:
     """On the tilted camera read on the table, for the pairs that truly are "close to": the
     median centre distance in metres from the true and from the Grad-CAM points."""
-    from zsrm.envs.cameras import apply_homography
-
     dist = {"true": [], "gradcam": []}
     for s, scene in enumerate(data.scenes):
         rows = np.nonzero(scene_index == s)[0]
@@ -268,8 +253,6 @@ def _stacked_pairs(xy: np.ndarray, truth: np.ndarray, table: RelationTable, thre
 def _shortfalls(report: dict, cfg: LabelConfig, widths: dict, table_cameras=frozenset()) -> list[str]:
     """Which targets this report misses, and the numbers that say why: each short relation's
     camera's median Grad-CAM error against the pixel threshold its decision turns on."""
-    from zsrm.grounding.labeler import pixel_thresholds
-
     out = []
     front = report["median_px_error"].get("front")
     if front is not None and front > widths["front"] / 2:
@@ -343,32 +326,14 @@ def figure3(data_folder, vlm, out: str | Path, labels: str | Path = LABELS, inde
             phrases=("red", "yellow")) -> Path:
     """Figure 3 (d, e) of the paper, per camera: the image, and the Grad-CAM heat maps of
     "red block" and "yellow block" (white is highest), with the located (+) and true (o) centres."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from zsrm.grounding.annotate import Grounder
+    plt = pyplot()
 
     data = ExplorationData(data_folder)
     manifest = read_manifest(data.labels_folder(labels))
     cfg = LabelConfig(**manifest["config"])
-    arr = data.load(["present", "scene"])
     idx = [COLOURS.index(c) for c in phrases]
-    if index is None:
-        candidates = np.nonzero(arr["present"][:, idx].all(1))[0]
-        if not len(candidates):
-            raise ValueError(f"no image holds both {' and '.join(phrases)} objects")
-        index = int(candidates[0])
-    # Load only the chosen image's shard.
-    start = 0
-    for name in data.shards:
-        n = data.manifest["shards"][name]["images"]
-        if index < start + n:
-            break
-        start += n
-    one = {k: v[index - start:index - start + 1] for k, v in data.shard(name).items()}
-    shape = SHAPE_OF[data.scenes[int(one["scene"][0])]]
+    index, one = _one_image(data, idx, index, phrases)
+    shape = SCENE_SHAPES[data.scenes[int(one["scene"][0])]]
     grounder = Grounder(vlm, cfg, data, manifest.get("centres"))
     grad = grounder.shard({k: v for k, v in one.items() if k.startswith("images_") or k == "scene"})
     size = data.config["image_size"]
@@ -396,16 +361,48 @@ def figure3(data_folder, vlm, out: str | Path, labels: str | Path = LABELS, inde
             ax.set_xticks([])
             ax.set_yticks([])
     fig.suptitle(f"Grad-CAM grounding ({cfg.vlm}), image {index}: + located, o true centre", fontsize=9)
-    fig.tight_layout()
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
+
+
+def _one_image(data: ExplorationData, idx: list[int], index: int | None, phrases) -> tuple[int, dict]:
+    """(index, arrays of that one image): the given one, or the first that holds all ``idx`` colours.
+    Only the image's own shard is loaded."""
+    if index is None:
+        candidates = np.nonzero(data.load(["present"])["present"][:, idx].all(1))[0]
+        if not len(candidates):
+            raise ValueError(f"no image holds both {' and '.join(phrases)} objects")
+        index = int(candidates[0])
+    start = 0
+    for name in data.shards:
+        n = data.manifest["shards"][name]["images"]
+        if index < start + n:
+            break
+        start += n
+    return index, {k: v[index - start:index - start + 1] for k, v in data.shard(name).items()}
 
 
 def save_report(report: dict, out: str | Path) -> Path:
+    """The report as JSON with flat dotted keys (see :func:`flatten`)."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(report, indent=2) + "\n")
+    out.write_text(json.dumps(flatten(report), indent=2) + "\n")
+    return out
+
+
+def flatten(report: dict, keep: tuple[str, ...] = ("meta", "notes", "relations")) -> dict:
+    """Nested report -> flat dotted keys (``median_px_error.front``); ``keep`` stay nested.
+
+    >>> flatten({"f1": {"left_of": 0.9}, "meta": {"images": 4}})
+    {'f1.left_of': 0.9, 'meta': {'images': 4}}
+    """
+    out: dict = {}
+
+    def walk(prefix: str, value):
+        if isinstance(value, dict) and prefix not in keep:
+            for k, v in value.items():
+                walk(f"{prefix}.{k}" if prefix else str(k), v)
+        else:
+            out[prefix] = value
+
+    walk("", report)
     return out

@@ -1,0 +1,14 @@
+"""The examples in the docstrings of the other layers run and give what they show."""
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ["zsrm.tasks.catalogue", "zsrm.envs.rollout", "zsrm.fullmodel", "zsrm.evaluation.metrics",
+           "zsrm.evaluation.curves", "zsrm.cli.options", "zsrm.testing.colour_vlm", "zsrm.testing.synthetic"]
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_docstring_examples(name):
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+    assert result.attempted > 0 and result.failed == 0
