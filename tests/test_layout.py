@@ -22,6 +22,9 @@ PACKAGE = ROOT / "zsrm"
 LAYERS = ["tasks", "envs", "vlm", "data", "grounding", "fullmodel", "rewards", "rl", "policy", "evaluation",
           "pipeline", "testing", "cli"]
 CLI = "cli"
+# Pairs the order allows but the design does not: (package, package it must not import, why).
+APART = [("vlm", "envs", "the VLM knows no simulator: the renders it learns from are data, handed to it"),
+         ("rewards", "envs", "a reward sees pixels and text; rollouts along scripted controllers are evaluation")]
 MAX_FUNCTION_LINES = 60
 
 _MODULE_STRING = re.compile(r"^zsrm(\.[A-Za-z_][A-Za-z0-9_]*)+$")
@@ -95,6 +98,12 @@ def test_no_layer_imports_a_higher_one():
     bad = [f"{_where(path, line)}: {src} imports {dst}" for path, line, src, dst in _imports()
            if rank[dst] > rank[src]]
     assert not bad, "lower layers import higher ones:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("src, dst, why", APART)
+def test_packages_kept_apart(src, dst, why):
+    bad = [_where(path, line) for path, line, a, b in _imports() if (a, b) == (src, dst)]
+    assert not bad, f"{src} imports {dst} ({why}): " + ", ".join(bad)
 
 
 def test_no_import_circle_between_packages():

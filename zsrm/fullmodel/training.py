@@ -38,9 +38,11 @@ from zsrm.fullmodel.student import StudentConfig, StudentRewardNet
 from zsrm.tasks.negatives import candidate_texts
 from zsrm.vlm.base import VisionLanguageModel
 from zsrm.vlm.factory import load_vlm
+from zsrm.vlm.registry import load_weights, save_weights
 from zsrm.vlm.losses import multi_positive_contrastive_loss
 from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
 
+CHECKPOINT_WEIGHTS = "weights.safetensors"
 STUDENT_PRESETS = {
     "default": {},
     "tiny": {"widths": (8, 8, 16, 16), "embed_dim": 16, "text_hidden": 32},
@@ -220,17 +222,13 @@ def evaluate_pairs(model: VisionLanguageModel, data: CaptionedImages, max_pairs:
 # --- checkpoints -------------------------------------------------------------------------------
 def _save_checkpoint(folder: Path, model: nn.Module, opt: torch.optim.Optimizer, step: int, cfg: FinetuneConfig,
                      log: list[dict]):
-    from safetensors.torch import save_model
-
-    save_checkpoint(folder, lambda tmp: save_model(model, str(tmp / "weights.safetensors")), opt,
+    save_checkpoint(folder, lambda tmp: save_weights(model, tmp, CHECKPOINT_WEIGHTS), opt,
                     {"step": step, "config": cfg.identity(), "log": log})
 
 
 def _load_checkpoint(folder: Path, model: nn.Module, opt: torch.optim.Optimizer, cfg: FinetuneConfig):
-    from safetensors.torch import load_model
-
     state = read_checkpoint_state(folder, cfg.identity())
-    load_model(model, str(folder / "weights.safetensors"), strict=True)
+    load_weights(model, folder, CHECKPOINT_WEIGHTS)
     load_optimizer(folder, opt)
     return state["step"], state["log"]
 

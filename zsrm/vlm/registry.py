@@ -78,15 +78,20 @@ def load_weights(module, folder: str | Path, file: str = WEIGHTS_FILE, device="c
     load_model(module, str(path), strict=True, device=str(device))
 
 
-def save_folder(folder: str | Path, config: dict, weights: dict) -> None:
-    """Write ``config`` as config.json and each ``file -> module`` of ``weights`` as safetensors."""
+def save_weights(module, folder: str | Path, file: str = WEIGHTS_FILE) -> None:
+    """Write ``module``'s weights to ``folder/file`` as safetensors (the folder is made)."""
     from safetensors.torch import save_model
 
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    save_model(module, str(Path(folder) / file))
+
+
+def save_folder(folder: str | Path, config: dict, weights: dict) -> None:
+    """Write ``config`` as config.json and each ``file -> module`` of ``weights`` as safetensors."""
     for file, module in weights.items():
-        save_model(module, str(folder / file))
-    (folder / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
+        save_weights(module, folder, file)
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    (Path(folder) / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
 
 
 def load_folder(folder: str | Path, device="cpu"):
