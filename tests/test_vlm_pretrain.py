@@ -13,7 +13,7 @@ from zsrm.cli import main
 from zsrm.data.renders import load_renders
 from zsrm.pipeline.build import pretrain_scene_vlm
 from zsrm.vlm import load_vlm
-from zsrm.evaluation.presence import presence_eval, write_presence_results
+from zsrm.evaluation.vlm_presence import presence_eval, write_presence_results
 from zsrm.vlm.pretrain import PretrainConfig, learning_rate, make_batch
 
 TINY = dict(arch="tiny", scenes=4, shard_size=2, steps=6, batch_size=8, checkpoint_every=2, warmup_steps=2)

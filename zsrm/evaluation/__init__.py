@@ -1,7 +1,7 @@
 """Evaluation: how well each stage does, against the oracle (true state), as tables and plots.
 
 * :mod:`~zsrm.evaluation.scripted_success`: every task is achievable (``zsrm scripted-eval``);
-* :mod:`~zsrm.evaluation.presence`: the scene VLM's zero-shot presence AUROC (``zsrm eval-vlm``);
+* :mod:`~zsrm.evaluation.vlm_presence`: the scene VLM's zero-shot presence AUROC (``zsrm eval-vlm``);
 * :mod:`~zsrm.evaluation.grounding_quality`: Grad-CAM localisation and caption F1 (``zsrm eval-grounding``);
 * :mod:`~zsrm.evaluation.reward_quality`: rewards against the oracle on held-out frames (``zsrm eval-reward``);
 * :mod:`~zsrm.evaluation.curves`: rewards along scripted trajectories (Figure 5, ``zsrm reward-curve``);

@@ -92,7 +92,7 @@ class EvalVlm:
     quiet: bool = False  # no progress bars
 
     def run(self) -> int:
-        from zsrm.evaluation.presence import presence_eval, write_presence_results
+        from zsrm.evaluation.vlm_presence import presence_eval, write_presence_results
         from zsrm.vlm import load_vlm
 
         if self.images < 10:
