@@ -2,7 +2,8 @@
 AdamW with decay on weight matrices only, linear warmup then cosine decay, and checkpoints
 that a killed run resumes from.
 
-A checkpoint is a folder: the model's weights (written by the caller), ``optimizer.pt`` and
+A checkpoint is a folder: the model's weights (written by the caller), the optimiser's state
+(its tensors in ``optimizer.safetensors``, the rest in ``optimizer.json``: nothing is pickled) and
 ``state.json`` (step, the settings that define the run, the log). It is written beside the
 old one and swapped in, so a kill mid-write leaves the previous checkpoint intact.
 """
@@ -16,6 +17,10 @@ from typing import Callable
 
 import torch
 from torch import nn
+
+from zsrm.vlm.registry import load_tensors, save_tensors
+
+OPTIMIZER_TENSORS, OPTIMIZER_JSON = "optimizer.safetensors", "optimizer.json"
 
 
 def adamw(model: nn.Module, lr: float, weight_decay: float) -> torch.optim.AdamW:
@@ -39,7 +44,7 @@ def save_checkpoint(folder: Path, save_weights: Callable[[Path], None], opt: tor
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
     save_weights(tmp)
-    torch.save(opt.state_dict(), tmp / "optimizer.pt")  # tensors and numbers only: loads with weights_only=True
+    save_optimizer(opt, tmp)
     (tmp / "state.json").write_text(json.dumps(state) + "\n")
     old = folder.with_name(folder.name + ".old")
     if folder.exists():
@@ -60,5 +65,30 @@ def read_checkpoint_state(folder: Path, identity: dict) -> dict:
     return state
 
 
+def save_optimizer(opt: torch.optim.Optimizer, folder: Path) -> None:
+    """The optimiser's state: per-parameter tensors as safetensors, the rest (hyperparameters,
+    parameter ids, non-tensor state) as JSON."""
+    state_dict = opt.state_dict()
+    tensors, other = {}, {}
+    for pid, state in state_dict["state"].items():
+        for key, value in state.items():
+            (tensors if torch.is_tensor(value) else other)[f"{pid}.{key}"] = value
+    save_tensors(tensors, Path(folder) / OPTIMIZER_TENSORS)
+    (Path(folder) / OPTIMIZER_JSON).write_text(json.dumps({"param_groups": state_dict["param_groups"],
+                                                           "state": other}) + "\n")
+
+
 def load_optimizer(folder: Path, opt: torch.optim.Optimizer) -> None:
-    opt.load_state_dict(torch.load(folder / "optimizer.pt", weights_only=True))
+    """Restore what :func:`save_optimizer` wrote (or, from checkpoints written before it, the
+    tensors-only ``optimizer.pt``, read with ``weights_only=True``)."""
+    folder = Path(folder)
+    if not (folder / OPTIMIZER_JSON).exists() and (folder / "optimizer.pt").exists():
+        opt.load_state_dict(torch.load(folder / "optimizer.pt", weights_only=True))
+        return
+    saved = json.loads((folder / OPTIMIZER_JSON).read_text())
+    state: dict[int, dict] = {}
+    for key, value in {**load_tensors(folder / OPTIMIZER_TENSORS), **saved["state"]}.items():
+        pid, name = key.split(".", 1)
+        state.setdefault(int(pid), {})[name] = value
+    groups = [{k: tuple(v) if k == "betas" else v for k, v in group.items()} for group in saved["param_groups"]]
+    opt.load_state_dict({"state": state, "param_groups": groups})

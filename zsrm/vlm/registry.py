@@ -86,6 +86,19 @@ def save_weights(module, folder: str | Path, file: str = WEIGHTS_FILE) -> None:
     save_model(module, str(Path(folder) / file))
 
 
+def save_tensors(tensors: dict, path: str | Path) -> None:
+    """A flat ``name -> tensor`` dict as a safetensors file (e.g. an optimiser's state)."""
+    from safetensors.torch import save_file
+
+    save_file({k: v.detach().contiguous() for k, v in tensors.items()}, str(path))
+
+
+def load_tensors(path: str | Path) -> dict:
+    from safetensors.torch import load_file
+
+    return load_file(str(path))
+
+
 def save_folder(folder: str | Path, config: dict, weights: dict) -> None:
     """Write ``config`` as config.json and each ``file -> module`` of ``weights`` as safetensors."""
     for file, module in weights.items():
