@@ -27,7 +27,7 @@ from zsrm.envs.scripted import scripted_controller
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.rewards.interface import RewardModel, check_goal
 
-FIGURE5_GOAL = "a yellow puck close to a blue puck"
+FIGURE5_GOAL = "a yellow puck close to a blue puck"  # the paper's Figure 5: the first puck is pushed to the second
 
 
 @dataclass

@@ -14,9 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from zsrm.evaluation.curves import FIGURE5_GOAL
 from zsrm.tasks.catalogue import REPORT_TASKS
-
-FIGURE5_GOAL = "a yellow puck close to a blue puck"
 
 
 def write_json(obj: dict, out: str | Path, **dump) -> Path:
