@@ -23,8 +23,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from zsrm.tasks.negatives import COMPLEMENTS, caption_relation_camera, candidate_texts, complement_text
+from zsrm.data.dataset import LABELS, ExplorationData
+from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import Task
+from zsrm.tasks.negatives import COMPLEMENTS, caption_relation_camera, candidate_texts, complement_text
 
 
 @lru_cache(maxsize=None)
@@ -169,12 +171,9 @@ class CaptionedImages:
         return list(seen)
 
     @classmethod
-    def from_dataset(cls, folder: str | Path, labels: str | Path = "labels") -> "CaptionedImages":
+    def from_dataset(cls, folder: str | Path, labels: str | Path = LABELS) -> "CaptionedImages":
         """A collected and labelled dataset folder: its images, the Grad-CAM captions of
         ``labels`` and, for the complements, each scene's object list (what the labeler reads)."""
-        from zsrm.tasks.catalogue import SCENE_SHAPES
-        from zsrm.data.dataset import ExplorationData
-
         data = ExplorationData(folder)
         captions = data.captions(labels)  # Grad-CAM captions only (oracle=None)
         images, groups, objects = {c: [] for c in data.cameras}, [], []

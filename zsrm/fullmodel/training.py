@@ -32,15 +32,16 @@ import numpy as np
 import torch
 from torch import nn
 
+from zsrm.data.dataset import LABELS
 from zsrm.fullmodel.adapted import AdaptedVLM
 from zsrm.fullmodel.pairs import CaptionedImages, caption_relation
 from zsrm.fullmodel.student import StudentConfig, StudentRewardNet
 from zsrm.tasks.negatives import candidate_texts
 from zsrm.vlm.base import VisionLanguageModel
-from zsrm.vlm.factory import load_vlm
-from zsrm.vlm.registry import load_weights, save_weights
+from zsrm.vlm.factory import DEFAULT_VLM, load_vlm
 from zsrm.vlm.losses import multi_positive_contrastive_loss
 from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
+from zsrm.vlm.registry import load_weights, save_weights
 
 CHECKPOINT_WEIGHTS = "weights.safetensors"
 STUDENT_PRESETS = {
@@ -54,10 +55,10 @@ class FinetuneConfig:
     """Train the full reward model on labelled pairs (CLIP-style), or the student."""
 
     data: str = "data/zsrm/explore"  # dataset folder of zsrm reward-data (the default), or of zsrm collect + zsrm label
-    labels: str = "labels"  # labels folder inside the dataset (only its Grad-CAM captions are read)
+    labels: str = LABELS  # labels folder inside the dataset (only its Grad-CAM captions are read)
     out: str = ""  # model folder (default runs/zsrm/vlm, or runs/zsrm/student with --student)
     workdir: str = ""  # checkpoint and log folder (default OUT.work)
-    vlm: str = "scene"  # VLM to start from (scene, open_clip:RN50, a folder); with --student, the VLM whose text tower embeds the goal texts
+    vlm: str = DEFAULT_VLM  # VLM to start from (scene, open_clip:RN50, a folder); for the student, the one whose text tower it reads
     student: bool = False  # train the small student network from scratch
     student_arch: Literal["default", "tiny"] = "default"  # the student's architecture (STUDENT_PRESETS)
     spatial_grid: int = 4  # grid of the position-aware read-out added to the VLM's image head (0: none)

@@ -27,13 +27,14 @@ from typing import Literal
 
 import numpy as np
 
-from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.data.dataset import LABELS, ORACLE, ExplorationData
 from zsrm.data.shards import ShardFolder, save_json, save_npz
 from zsrm.grounding.gradcam import GradCAM
 from zsrm.grounding.labeler import SpatialLabeler, pixel_thresholds, world_table
+from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import WORLD_THRESHOLDS, Thresholds
+from zsrm.vlm.factory import DEFAULT_VLM
 
 
 @dataclass
@@ -41,7 +42,7 @@ class LabelConfig:
     """Options of ``zsrm label``. Thresholds are in metres (Table 1's, for 6 cm blocks); each
     camera's pixel thresholds are these times that camera's pixels per metre."""
 
-    vlm: str = "scene"  # the VLM Grad-CAM reads: scene, a saved VLM folder, open_clip:MODEL[:TAG]
+    vlm: str = DEFAULT_VLM  # the VLM Grad-CAM reads: scene, a saved VLM folder, open_clip:MODEL[:TAG]
     target: Literal["contrast", "score"] = "contrast"  # Grad-CAM target: a phrase's score minus the other colours' mean, or the score
     locate: Literal["argmax", "peak_centroid"] = "peak_centroid"  # object position: the heat map's argmax cell, or the centroid of its peak
     cell_centres: Literal["grid", "receptive_field"] = "receptive_field"  # pixel position of each Grad-CAM cell: its geometric centre, or the peak of its measured input gradient

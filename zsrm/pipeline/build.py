@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from zsrm.data.collect import CollectConfig
+from zsrm.data.dataset import LABELS
 from zsrm.fullmodel.training import FinetuneConfig
 from zsrm.grounding.annotate import LabelConfig
 from zsrm.pipeline import narrow
@@ -74,7 +75,7 @@ class Label(LabelConfig):
     """Grad-CAM captions of a collected dataset (+ true ones, for evaluation)."""
 
     data: str = field(metadata={"positional": True})  # folder written by zsrm collect
-    labels: str = "labels"  # labels folder (relative to DATA unless absolute)
+    labels: str = LABELS  # labels folder (relative to DATA unless absolute)
     quiet: bool = False  # no progress bar
 
     def run(self) -> int:
@@ -107,7 +108,7 @@ class RewardData:
     images: int = 16000  # images (per camera) in all
     shard_size: int = 250  # images per shard
     seed: int = 0  # seed of the whole dataset
-    labels: str = "labels"  # labels folder inside OUT
+    labels: str = LABELS  # labels folder inside OUT
     eps_y: float = 0.12  # on top of / below: largest height offset (m)
     close: float = 0.12  # close to: largest centre distance (m)
     quiet: bool = False  # no progress bars

@@ -18,6 +18,7 @@ from zsrm.envs.rollout import camera_strip, episode_steps, make_env, random_poli
 from zsrm.envs.scripted import scripted_controller
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.tasks.catalogue import REPORT_TASKS
+from zsrm.vlm.factory import DEFAULT_VLM
 
 SCENES = {"tabletop": "stack", "pushing": "push_close", "pendulum": "pendulum"}
 
@@ -104,7 +105,7 @@ REWARD_CURVES = {  # goal -> the camera its relation is read from
 }
 
 
-def write_reward_curves(out: Path, vlm_spec: str = "scene", zsrm_spec: str = "student") -> tuple[list[Path], list[dict]]:
+def write_reward_curves(out: Path, vlm_spec: str = DEFAULT_VLM, zsrm_spec: str = "student") -> tuple[list[Path], list[dict]]:
     """Base reward (paper 2.1) and the binarised ZSRM reward (paper 2.2, the shipped student)
     along scripted trajectories: CSV + PNG per goal, and how often each agrees with the oracle."""
     from zsrm.evaluation.curves import plot_curve, record_trajectory, reward_curve, write_csv

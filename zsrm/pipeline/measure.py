@@ -14,8 +14,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from zsrm.data.dataset import LABELS
 from zsrm.evaluation.curves import FIGURE5_GOAL
 from zsrm.tasks.catalogue import REPORT_TASKS
+from zsrm.vlm.factory import DEFAULT_VLM
 
 
 def write_json(obj: dict, out: str | Path, **dump) -> Path:
@@ -83,7 +85,7 @@ class EvalVlm:
     report AUROC per colour against true visibility.
     """
 
-    vlm: str = "scene"  # VLM spec: scene, a saved folder, open_clip:MODEL[:TAG|:FILE|:none]
+    vlm: str = DEFAULT_VLM  # VLM spec: scene, a saved folder, open_clip:MODEL[:TAG|:FILE|:none]
     images: int = 500  # held-out images
     seed: int = 0  # seed of the held-out (eval) stream
     out: str | None = None  # JSON path, e.g. results/vlm_presence.json (a PNG is written beside it)
@@ -113,7 +115,7 @@ class EvalVlm:
 
 @dataclass
 class BaseRewardOptions:
-    vlm: str = "scene"  # VLM spec: scene, open_clip:RN50, a model folder, ...
+    vlm: str = DEFAULT_VLM  # VLM spec: scene, open_clip:RN50, a model folder, ...
     mode: Literal["dot", "cosine", "projection"] = "dot"  # dot: E_I(image) . E_L(goal) (paper 2.1); cosine: normalised; projection: VLM-RMs goal-baseline regularisation
     baseline: str | None = None  # baseline sentence for --mode projection, e.g. 'two pucks on a table'
     alpha: float = 0.5  # projection strength in [0, 1]
@@ -184,7 +186,7 @@ class EvalGrounding:
     """Localisation error, caption P/R/F1, Figure 3."""
 
     data: str = field(metadata={"positional": True})  # a collected and labelled dataset folder
-    labels: str = "labels"  # labels folder (relative to DATA unless absolute)
+    labels: str = LABELS  # labels folder (relative to DATA unless absolute)
     out: str = "results/grounding.json"  # JSON report
     figure: str | None = None  # Figure 3 style PNG to write
     index: int | None = None  # image of the figure (default: first with red+yellow)
@@ -229,7 +231,7 @@ class EvalReward:
 
     zsrm: str = "runs/zsrm/student"  # the full reward model reported as 'zsrm': a student or fine-tuned VLM folder, or 'student' (the shipped one)
     compare: tuple[str, ...] = field(default=(), metadata={"metavar": "NAME=FOLDER", "split": False})  # more models to report beside it, e.g. finetuned_vlm=runs/zsrm/vlm
-    base: str = "scene"  # the base VLM (spec)
+    base: str = DEFAULT_VLM  # the base VLM (spec)
     base_mode: Literal["dot", "cosine"] = "dot"  # the base reward's raw score (dot: paper 2.1)
     tasks: tuple[str, ...] = REPORT_TASKS  # catalogue tasks
     scripted_episodes: int = 10  # scripted episodes per task

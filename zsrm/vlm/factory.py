@@ -24,6 +24,7 @@ import torch
 from zsrm.vlm.base import VisionLanguageModel
 from zsrm.vlm.registry import SHIPPED, WEIGHTS_FILE, load_folder
 
+DEFAULT_VLM = "scene"  # the VLM every stage uses unless told otherwise
 DEFAULT_OPEN_CLIP_MODEL = "RN50"
 SPEC_HELP = ("'scene', a saved model folder, 'open_clip:MODEL' (e.g. open_clip:RN50), 'open_clip:MODEL:TAG', "
              "'open_clip:MODEL:/path/to/checkpoint.safetensors' or 'open_clip:MODEL:none'")
@@ -39,7 +40,7 @@ def shipped_folder(name: str) -> Path:
     return folder
 
 
-def load_vlm(spec: str | Path = "scene", device: str | torch.device = "cpu") -> VisionLanguageModel:
+def load_vlm(spec: str | Path = DEFAULT_VLM, device: str | torch.device = "cpu") -> VisionLanguageModel:
     """A VLM from a spec string (see the module docstring), in eval mode."""
     if isinstance(spec, Path):
         return load_folder(spec, device)
