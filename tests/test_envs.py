@@ -33,7 +33,7 @@ def test_observations_are_images_only_and_info_has_the_oracle():
     obs, info = env.reset(seed=3)
     assert set(obs) == {"front", "tilted"}
     assert all(o.shape == (64, 64, 3) and o.dtype == np.uint8 for o in obs.values())
-    assert set(info) == {"object_positions", "oracle_reward", "is_success"}
+    assert set(info) == {"object_positions", "oracle_reward", "is_success", "oracle_steps"}
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     assert reward == 0.0  # no environment reward ever reaches the agent
     assert info["oracle_reward"] in (0.0, 1.0)

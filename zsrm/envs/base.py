@@ -23,7 +23,12 @@ from zsrm.tasks.language import COLOURS, GoalError
 from zsrm.tasks.relations import CAMERAS, WORLD_THRESHOLDS, holds_in_world
 
 TABLE_TOP = 0.4
+TABLE_HALF_X, TABLE_HALF_Y = 0.32, 0.24  # the table top's half extents (MJCF)
 SPREADS = ("seen", "unseen")
+# Objects never move faster than this (m/s): the gripper's top speed is 0.75 m/s, so only a
+# contact glitch (fingers closing beside a block) could go faster, and it would throw the
+# block off the table.
+MAX_OBJECT_SPEED = 1.0
 
 
 def load_model(asset: str) -> mujoco.MjModel:
@@ -67,7 +72,10 @@ class MujocoPixelEnv(gym.Env):
     frame_skip = 8  # 8 x 5 ms = one 0.04 s control step
 
     def __init__(self, task, cameras=("front",), image_size: int = 64, spread: str = "seen",
-                 render_mode: str | None = None, objects=None):
+                 render_mode: str | None = None, objects=None, action_repeat: int = 1):
+        if not isinstance(action_repeat, (int, np.integer)) or action_repeat < 1:
+            raise ValueError(f"action_repeat must be an integer >= 1, got {action_repeat!r}")
+        self.action_repeat = int(action_repeat)  # control steps per env step; only the last is rendered
         if spread not in SPREADS:
             raise ValueError(f"unknown spread {spread!r}; choose one of {', '.join(SPREADS)}")
         if not isinstance(image_size, (int, np.integer)) or not 16 <= image_size <= 512:
@@ -125,13 +133,21 @@ class MujocoPixelEnv(gym.Env):
 
     # --- oracle ------------------------------------------------------------------------
     def oracle_success(self) -> bool:
+        """Table 1 on the true positions; an object that left the table satisfies nothing."""
         if self.task is None:
             return False
         pos = self.object_positions()
+        if not all(self.over_table(pos[c]) for c in self.task.objects):
+            return False
         return bool(holds_in_world(self.task.relation, [pos[c] for c in self.task.objects], WORLD_THRESHOLDS))
 
+    @staticmethod
+    def over_table(p) -> bool:
+        """Is this object centre above the table top (resting, held or stacked), not falling?"""
+        return abs(p[0]) < TABLE_HALF_X and abs(p[1]) < TABLE_HALF_Y and p[2] > TABLE_TOP
+
     def fell_off(self) -> bool:
-        return any(p[2] < TABLE_TOP - 0.05 for p in self.object_positions().values())
+        return not all(self.over_table(p) for p in self.object_positions().values())
 
     def _info(self) -> dict:
         success = self.oracle_success()
@@ -139,6 +155,7 @@ class MujocoPixelEnv(gym.Env):
             "object_positions": self.object_positions(),
             "oracle_reward": float(success),
             "is_success": success,
+            "oracle_steps": int(success),
         }
 
     # --- layout ------------------------------------------------------------------------
@@ -213,16 +230,38 @@ class MujocoPixelEnv(gym.Env):
         return self._observation(), self._info()
 
     def step(self, action):
+        """Apply ``action`` for ``action_repeat`` control steps and render the last one.
+
+        ``info["oracle_steps"]`` counts the control steps in the goal relation (the oracle
+        metric sums it over an episode); ``oracle_reward`` and ``is_success`` are the verdict
+        after the last one.
+        """
         action = np.asarray(action, dtype=np.float64)
         if action.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {action.shape}")
-        self._apply_action(np.clip(action, -1.0, 1.0))
+        in_goal, terminated = 0, False
+        for _ in range(self.action_repeat):
+            self._apply_action(np.clip(action, -1.0, 1.0))
+            in_goal += int(self.oracle_success())
+            terminated = self.fell_off()
+            if terminated:
+                break
         info = self._info()
-        terminated = self.fell_off()
+        info["oracle_steps"] = in_goal
         return self._observation(), 0.0, terminated, False, info
 
     def _reset_agent(self):
         raise NotImplementedError
+
+    def _simulate(self):
+        """One control step of physics, then the object speed limit."""
+        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        for colour in self.objects:
+            adr = self.model.jnt_dofadr[self.model.body_jntadr[self._body(colour)]]
+            v = self.data.qvel[adr:adr + 3]
+            speed = float(np.linalg.norm(v))
+            if speed > MAX_OBJECT_SPEED:
+                v *= MAX_OBJECT_SPEED / speed
 
     def _apply_action(self, action: np.ndarray):
         raise NotImplementedError

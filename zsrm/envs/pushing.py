@@ -10,8 +10,10 @@ from zsrm.envs.base import TABLE_TOP, MujocoPixelEnv
 PUCK_HALF = 0.035
 PUCK_HALF_HEIGHT = 0.02
 MAX_MOVE = 0.025  # metres of pusher motion per step at |action| = 1
-X_RANGE = (-0.27, 0.27)
-Y_RANGE = (-0.2, 0.2)
+# Pusher workspace: its edge (2 cm radius) plus a puck's width (7 cm) stays on the table
+# (half extents 0.32 x 0.24 m), so the pusher cannot shove a puck over the edge.
+X_RANGE = (-0.22, 0.22)
+Y_RANGE = (-0.14, 0.14)
 PUSHER_Z = TABLE_TOP + 0.03
 
 
@@ -34,8 +36,8 @@ class PushingEnv(MujocoPixelEnv):
     rest_height = PUCK_HALF_HEIGHT
 
     def __init__(self, task="push_close", cameras=("front",), image_size=64, spread="seen", render_mode=None,
-                 objects=None):
-        super().__init__(task, cameras, image_size, spread, render_mode, objects)
+                 objects=None, action_repeat: int = 1):
+        super().__init__(task, cameras, image_size, spread, render_mode, objects, action_repeat)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
         m = self.model
         self._mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "mocap")]
@@ -47,7 +49,7 @@ class PushingEnv(MujocoPixelEnv):
         rel = self.task.relation
         side = rng.choice([-1.0, 1.0])
         if rel in ("close_to", "inside_of", "on_top_of", "below", "in_between"):
-            xs, ys = [side * 1.8 * w, -side * 1.8 * w, 0.0], [0.5 * w, 0.5 * w, 0.5 * w]
+            xs, ys = [side * 1.3 * w, -side * 1.3 * w, 0.0], [0.5 * w, 0.5 * w, 0.5 * w]
         elif rel == "left_of":
             xs, ys = [1.2 * w, -1.2 * w], [0.5 * w, 0.5 * w]
         elif rel == "right_of":
@@ -63,8 +65,17 @@ class PushingEnv(MujocoPixelEnv):
         return layout
 
     def _reset_agent(self):
+        """Task scenes: the pusher starts on the far side of the puck the goal moves (2-3 puck
+        half-widths from its centre, away from the other puck), so exploration pushes it;
+        exploration scenes: anywhere along the front edge."""
         rng = self.np_random
-        pos = np.array([rng.uniform(-0.2, 0.2), rng.uniform(-0.19, -0.13), PUSHER_Z])
+        pos = np.array([rng.uniform(-0.2, 0.2), rng.uniform(-0.14, -0.11), PUSHER_Z])
+        if self.task is not None:
+            mover, anchor = (self.data.qpos[self._qpos_adr(c):self._qpos_adr(c) + 3] for c in self.task.objects[:2])
+            side = np.sign(mover[0] - anchor[0]) or 1.0
+            pos[0] = mover[0] + side * rng.uniform(2.0, 3.0) * PUCK_HALF
+            pos[1] = mover[1] + rng.uniform(-PUCK_HALF, PUCK_HALF)
+            pos = np.clip(pos, [X_RANGE[0], Y_RANGE[0], PUSHER_Z], [X_RANGE[1], Y_RANGE[1], PUSHER_Z])
         self.data.mocap_pos[self._mocap] = pos
         self.data.qpos[self._pusher_qadr:self._pusher_qadr + 3] = pos
         self.data.qpos[self._pusher_qadr + 3:self._pusher_qadr + 7] = (1, 0, 0, 0)
@@ -77,4 +88,4 @@ class PushingEnv(MujocoPixelEnv):
         target = self.data.mocap_pos[self._mocap] + MAX_MOVE * np.array([action[0], action[1], 0.0])
         target = np.clip(target, [X_RANGE[0], Y_RANGE[0], PUSHER_Z], [X_RANGE[1], Y_RANGE[1], PUSHER_Z])
         self.data.mocap_pos[self._mocap] = target
-        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        self._simulate()

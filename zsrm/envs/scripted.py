@@ -17,7 +17,7 @@ from zsrm.envs.base import TABLE_TOP
 
 W = 2 * tabletop.BLOCK_HALF  # block width
 HOVER_Z = TABLE_TOP + 0.2
-GRASP_DZ = 0.056  # gripper origin above the block centre when the fingers hold it (tips clear the table)
+GRASP_DZ = tabletop.GRASP_HEIGHT  # the fingers hold the block, tips clear of the table
 
 
 def scripted_controller(env):
@@ -66,9 +66,10 @@ class PickPlaceController:
             return pos[objs[1]] + (0, -2 * W, 0)
         if rel == "behind":
             return pos[objs[1]] + (0, 2 * W, 0)
-        # close_to: beside the other block, on the mover's side.
-        side = np.sign(pos[objs[0]][0] - pos[objs[1]][0]) or 1.0
-        return pos[objs[1]] + (side * 1.3 * W, 0, 0)
+        # close_to: in front of or behind the other block (the fingers open along x, so
+        # beside it in x an opening finger would shove it away).
+        side = np.sign(pos[objs[0]][1] - pos[objs[1]][1]) or 1.0
+        return pos[objs[1]] + (0, side * 1.3 * W, 0)
 
     def _move(self, target, grip: float):
         g = self.env.gripper_position

@@ -11,10 +11,16 @@ from zsrm.tasks.relations import RELATIONS
 BLOCK_HALF = 0.03
 MAX_MOVE = 0.03  # metres of gripper motion per step at |action| = 1
 # Gripper workspace (gripper body origin; fingertips reach 0.08 below it).
-X_RANGE = (-0.25, 0.25)
+X_RANGE = (-0.2, 0.2)  # fingers (6.1 cm out) cannot push a block past the edge (0.32)
 Y_RANGE = (-0.16, 0.16)
 Z_RANGE = (TABLE_TOP + 0.084, TABLE_TOP + 0.33)
 FINGER_OPEN, FINGER_CLOSED = 0.0, 0.045
+GRASP_HEIGHT = 0.056  # gripper origin above a block's centre when the fingers hold it
+FINGERTIP_DROP = 0.08  # fingertips below the gripper origin
+# The grip command has hysteresis: the fingers close when it rises above GRIP_CLOSE and open
+# again only when it falls below GRIP_OPEN. With a plain sign test, random (and early PPO)
+# actions released a grasped block after about one step; now a grasp survives a noisy command.
+GRIP_CLOSE, GRIP_OPEN = 0.3, -0.7
 
 
 class TabletopEnv(MujocoPixelEnv):
@@ -22,8 +28,10 @@ class TabletopEnv(MujocoPixelEnv):
 
     Actions in [-1, 1]: ``(dx, dz, grip)`` in the front camera's plane ("planar", the default
     for relations the front camera reads) or ``(dx, dy, dz, grip)`` ("full", the default for
-    in front of / behind / close to / inside of). ``grip > 0`` closes the fingers; a block held
-    between closing fingers is welded to the gripper until they open (a grasp that does not slip).
+    in front of / behind / close to / inside of). ``grip`` above 0.3 closes the fingers and only
+    ``grip`` below -0.7 opens them again (hysteresis, so a noisy command keeps its grasp); a block
+    held between closing fingers is welded to the gripper until they open (a grasp that does not
+    slip).
 
     >>> import gymnasium as gym, zsrm.envs
     >>> env = gym.make("zsrm/Tabletop-v0", task="a yellow block on top of a red block")
@@ -39,8 +47,8 @@ class TabletopEnv(MujocoPixelEnv):
     rest_height = BLOCK_HALF
 
     def __init__(self, task="stack", cameras=("front",), image_size=64, spread="seen",
-                 action_mode: str | None = None, render_mode=None, objects=None):
-        super().__init__(task, cameras, image_size, spread, render_mode, objects)
+                 action_mode: str | None = None, render_mode=None, objects=None, action_repeat: int = 1):
+        super().__init__(task, cameras, image_size, spread, render_mode, objects, action_repeat)
         if action_mode is None:
             planar = self.task is not None and RELATIONS[self.task.relation].camera == "front"
             action_mode = "planar" if planar else "full"
@@ -54,6 +62,7 @@ class TabletopEnv(MujocoPixelEnv):
         self._gripper_qadr = m.jnt_qposadr[m.body_jntadr[self._gripper]]
         self._grasp_eq = {c: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f"grasp_{c}") for c in self.objects}
         self.held: str | None = None
+        self.closed = False  # the grip state the hysteresis keeps
 
     # --- layout ------------------------------------------------------------------------
     def _initial_layout(self):
@@ -84,15 +93,28 @@ class TabletopEnv(MujocoPixelEnv):
         return layout
 
     def _reset_agent(self):
+        """Task scenes: the gripper starts open above the block the goal moves (within one block
+        width, its fingertips 1-6 cm above the block), so exploration touches it; exploration
+        scenes: anywhere above the table."""
         rng = self.np_random
         y = 0.0 if self.action_mode == "planar" else rng.uniform(-0.08, 0.08)
         pos = np.array([rng.uniform(-0.15, 0.15), y, rng.uniform(TABLE_TOP + 0.15, TABLE_TOP + 0.25)])
+        if self.task is not None:
+            rel, objs = self.task.relation, self.task.objects
+            mover = objs[1] if rel == "below" else objs[0]
+            block = self.data.qpos[self._qpos_adr(mover):self._qpos_adr(mover) + 3]
+            pos[0] = block[0] + rng.uniform(-2 * BLOCK_HALF, 2 * BLOCK_HALF)
+            if self.action_mode == "full":
+                pos[1] = block[1] + rng.uniform(-BLOCK_HALF, BLOCK_HALF)
+            pos[2] = block[2] + BLOCK_HALF + FINGERTIP_DROP + rng.uniform(0.01, 0.06)
+            pos = np.clip(pos, [X_RANGE[0], Y_RANGE[0], Z_RANGE[0]], [X_RANGE[1], Y_RANGE[1], Z_RANGE[1]])
         self.data.mocap_pos[self._mocap] = pos
         self.data.qpos[self._gripper_qadr:self._gripper_qadr + 3] = pos
         self.data.qpos[self._gripper_qadr + 3:self._gripper_qadr + 7] = (1, 0, 0, 0)
         self.data.ctrl[:] = FINGER_OPEN
         self.data.eq_active[list(self._grasp_eq.values())] = 0
         self.held = None
+        self.closed = False
 
     # --- control -----------------------------------------------------------------------
     @property
@@ -109,7 +131,11 @@ class TabletopEnv(MujocoPixelEnv):
         if self.action_mode == "planar":
             target[1] = 0.0
         self.data.mocap_pos[self._mocap] = target
-        closing = action[-1] > 0
+        if action[-1] > GRIP_CLOSE:
+            self.closed = True
+        elif action[-1] < GRIP_OPEN:
+            self.closed = False
+        closing = self.closed
         if closing and self.held is None:
             self.held = self._block_between_fingers()
             if self.held is not None:
@@ -119,7 +145,7 @@ class TabletopEnv(MujocoPixelEnv):
             self.held = None
         # Fingers close onto a held block's faces, or fully when empty.
         self.data.ctrl[:] = (0.053 - 0.008 - BLOCK_HALF) if self.held else (FINGER_CLOSED if closing else FINGER_OPEN)
-        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        self._simulate()
 
     def _block_between_fingers(self) -> str | None:
         g = self.gripper_position
