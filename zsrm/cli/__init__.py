@@ -14,7 +14,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from zsrm.cli.options import add_command, from_namespace  # noqa: E402
-from zsrm.pipeline import build, demo, measure  # noqa: E402
+from zsrm.pipeline import build, demo, learn, measure  # noqa: E402
 
 COMMANDS = {
     "render": measure.Render,
@@ -30,6 +30,9 @@ COMMANDS = {
     "reward-data": build.RewardData,
     "finetune": build.Finetune,
     "eval-reward": measure.EvalReward,
+    "train": learn.Train,
+    "rollout": learn.Rollout,
+    "sweep": learn.Sweep,
 }
 
 

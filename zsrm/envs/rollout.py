@@ -68,3 +68,22 @@ def run_episode(env, policy: PolicyMaker, seed: int, max_steps: int | None = Non
         if t:
             steps, steps_in_goal = t, steps_in_goal + int(info["is_success"])
     return {"success": bool(info["is_success"]), "steps_in_goal": steps_in_goal, "steps": steps}
+
+
+def run_vec_episodes(venv, act: Callable[[dict], np.ndarray]) -> dict:
+    """One episode in each env of a vectorised env (SB3 ``VecEnv``), all stepped together:
+    ``act`` maps a batch of observations to a batch of actions. Returns each episode's oracle
+    reward (the control steps in the goal relation, ``info["oracle_steps"]``) and whether the
+    goal held at its end.
+    """
+    n = venv.num_envs
+    obs = venv.reset()
+    totals, success, running = np.zeros(n), np.zeros(n, dtype=bool), np.ones(n, dtype=bool)
+    while running.any():
+        obs, _, dones, infos = venv.step(act(obs))
+        for i, info in enumerate(infos):
+            if running[i]:
+                totals[i] += info.get("oracle_steps", int(info["is_success"]))
+                if dones[i]:
+                    success[i], running[i] = bool(info["is_success"]), False
+    return {"episode_rewards": totals.tolist(), "successes": success.tolist()}

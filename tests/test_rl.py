@@ -1,0 +1,103 @@
+"""zsrm train: a few hundred PPO steps with each reward, kill and resume, saved policies."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from zsrm.rl import TrainConfig, train
+from zsrm.rl.evaluate import mean_se
+from zsrm.rl.policy import PolicyBundle
+
+TINY = dict(n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, keypoints=4)
+
+
+@pytest.mark.parametrize("reward", ["oracle", "zsrm"])
+def test_a_few_hundred_ppo_steps_with_each_reward(tmp_path, reward):
+    cfg = TrainConfig(goal="push_close", reward=reward, steps=256, eval_every=128, checkpoint_every=128, **TINY)
+    summary = train(cfg, tmp_path, progress=False)
+    assert summary["env_steps"] == 256
+    assert [row["env_steps"] for row in summary["curve"]] == [128, 256]
+    assert 0 <= summary["final_mean"] <= 100 and summary["final_episodes"] == 30
+    for name in ("config.json", "eval.csv", "summary.json", "policy/model.safetensors", "policy/config.json"):
+        assert (tmp_path / name).is_file(), name
+    assert list((tmp_path / "tb").iterdir()), "no TensorBoard events"
+    assert len((tmp_path / "eval.csv").read_text().splitlines()) == 3
+
+
+def test_a_finished_run_is_not_trained_again(tmp_path):
+    cfg = TrainConfig(goal="push_close", reward="random")
+    first = train(cfg, tmp_path, progress=False)
+    mtime = (tmp_path / "summary.json").stat().st_mtime_ns
+    assert train(cfg, tmp_path, progress=False) == first
+    assert (tmp_path / "summary.json").stat().st_mtime_ns == mtime
+
+
+def test_killed_run_resumes_to_the_same_step_count(tmp_path):
+    cfg = dict(goal="place_right", reward="oracle", steps=768, eval_every=128, checkpoint_every=128, **TINY)
+    code = ("import json, sys; from zsrm.rl import TrainConfig, train; "
+            f"train(TrainConfig(**json.loads(sys.argv[1])), {str(tmp_path)!r}, progress=False)")
+    proc = subprocess.Popen([sys.executable, "-c", code, json.dumps(cfg)], env={**os.environ, "OMP_NUM_THREADS": "1"})
+    state = tmp_path / "checkpoint" / "state.json"
+    deadline = time.time() + 300
+    while not state.is_file() and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert state.is_file() and not (tmp_path / "summary.json").exists()
+    killed_at = json.loads(state.read_text())["env_steps"]
+    assert 0 < killed_at < 768
+    summary = train(TrainConfig(**cfg), tmp_path, progress=False)
+    assert summary["env_steps"] == 768
+    steps = [row["env_steps"] for row in summary["curve"]]
+    assert steps == sorted(set(steps)) and steps[-1] == 768  # the curve continues, no step twice
+
+
+def test_resume_refuses_other_settings(tmp_path):
+    cfg = TrainConfig(goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128, **TINY)
+    train(cfg, tmp_path, progress=False)
+    (tmp_path / "summary.json").unlink()
+    other = TrainConfig(**{**cfg.to_dict(), "learning_rate": 1e-3})
+    with pytest.raises(ValueError, match="learning_rate"):
+        train(other, tmp_path, progress=False)
+
+
+def test_saved_policy_reloads_and_acts_the_same(tmp_path):
+    cfg = TrainConfig(goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128, **TINY)
+    train(cfg, tmp_path, progress=False)
+    a, b = PolicyBundle.load(tmp_path / "policy"), PolicyBundle.load(tmp_path / "policy")
+    rng = np.random.default_rng(0)
+    space = a.policy.observation_space
+    obs = {"features": rng.random((5, *space["features"].shape), np.float32),
+           "image": rng.integers(0, 256, (5, *space["image"].shape), dtype=np.uint8)}
+    assert np.array_equal(a.act(obs), b.act(obs))
+    # ... and the same as the policy the run ended with (its last checkpoint).
+    c = PolicyBundle.load(tmp_path / "checkpoint")
+    assert np.array_equal(a.act(obs), c.act(obs))
+    assert a.cfg == cfg
+
+
+def test_policy_folder_errors_name_the_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match="config.json"):
+        PolicyBundle.load(tmp_path)
+    (tmp_path / "config.json").write_text("[1, 2]")
+    with pytest.raises(ValueError, match="zsrm-policy"):
+        PolicyBundle.load(tmp_path)
+
+
+def test_config_is_checked():
+    with pytest.raises(ValueError, match="unknown reward"):
+        TrainConfig(reward="vice!")
+    with pytest.raises(ValueError, match="action_repeat"):
+        TrainConfig(action_repeat=3)
+    assert TrainConfig(action_repeat=4).episode_decisions == 25
+
+
+def test_mean_se():
+    assert mean_se([1.0]) == (1.0, 0.0)
+    mean, se = mean_se([0.0, 2.0])
+    assert mean == 1.0 and se == pytest.approx(1.0)

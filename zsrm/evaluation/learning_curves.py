@@ -1,0 +1,52 @@
+"""Learning curves of a sweep (Figure 6 of the paper): one panel per task, one line per reward,
+the mean and standard error over seeds of the oracle episode reward against env steps.
+
+>>> summary = {"stack": {"oracle": {"curve": [{"env_steps": 1000, "mean": 3.0, "se": 1.0}],
+...                                 "final_mean": 3.0, "final_se": 1.0, "seeds": 3}}}
+>>> plot_learning_curves(summary, "/tmp/zsrm-doctest-curves.png").name
+'zsrm-doctest-curves.png'
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from zsrm.evaluation.plots import pyplot, save_figure
+
+REWARD_COLOURS = {"zsrm": "tab:blue", "oracle": "tab:green", "vice": "tab:purple", "base": "tab:orange",
+                  "curiosity": "tab:red", "random": "tab:gray"}
+
+
+def plot_learning_curves(summary: dict, path: str | Path, title: str = "") -> Path:
+    """``summary``: ``task -> reward -> {curve, final_mean, final_se, seeds}`` (:func:`zsrm.rl.sweep.gather`).
+    Rewards without a curve (the random policy) are drawn as a flat band at their final mean."""
+    plt = pyplot()
+    tasks = list(summary)
+    fig, axes = plt.subplots(1, len(tasks), figsize=(4.2 * len(tasks), 3.4), squeeze=False)
+    for ax, task in zip(axes[0], tasks):
+        x_max = max((row["env_steps"] for r in summary[task].values() for row in r.get("curve", [])), default=1)
+        for reward, result in summary[task].items():
+            colour = REWARD_COLOURS.get(reward)
+            label = f"{reward} ({result['seeds']} seeds)"
+            curve = result.get("curve") or []
+            if curve:
+                x = np.array([row["env_steps"] for row in curve])
+                y = np.array([row["mean"] for row in curve])
+                se = np.array([row["se"] for row in curve])
+                ax.plot(x, y, color=colour, label=label)
+                ax.fill_between(x, y - se, y + se, color=colour, alpha=0.2, linewidth=0)
+            else:
+                m, se = result["final_mean"], result["final_se"]
+                ax.axhline(m, color=colour, linestyle="--", label=label)
+                ax.axhspan(m - se, m + se, color=colour, alpha=0.15, linewidth=0)
+        ax.set_title(task)
+        ax.set_xlim(0, x_max)
+        ax.set_ylim(bottom=0)
+        ax.set_xlabel("env steps")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("oracle episode reward (of 100)")
+    axes[0][-1].legend(fontsize=8, loc="upper left")
+    if title:
+        fig.suptitle(title)
+    return save_figure(fig, path)

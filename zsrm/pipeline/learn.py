@@ -1,0 +1,104 @@
+"""Stages that learn policies: ``zsrm train``, ``zsrm rollout``, ``zsrm sweep``.
+
+Heavy imports (torch, SB3, Ray, MuJoCo) happen inside ``run``, so ``zsrm --help`` stays fast.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from zsrm.rl.config import PRESETS, REWARDS, TrainConfig
+
+SWEEP_TASKS = ("stack", "place_right", "push_close")
+
+
+def with_preset(options, name: str) -> TrainConfig:
+    """The TrainConfig of ``options``; a preset's value fills each field left at its default."""
+    defaults = TrainConfig()
+    values = {f.name: getattr(options, f.name) for f in dataclasses.fields(TrainConfig)}
+    for key, value in PRESETS[name].items():
+        if values[key] == getattr(defaults, key):
+            values[key] = value
+    return TrainConfig(**values)
+
+
+@dataclass
+class Train(TrainConfig):
+    """Train a policy from pixels with PPO and a reward from the goal sentence."""
+
+    out: str | None = None  # run folder (default: runs/rl/<goal>-<reward>-<seed>)
+    config: Literal["cpu", "paper"] = "cpu"  # preset: cpu (300k steps, 2 cores) or paper (200k steps, more envs)
+    fresh: bool = False  # start over instead of resuming the run folder's checkpoint
+
+    def run(self) -> int:
+        from zsrm.rl.ppo import train
+
+        cfg = with_preset(self, self.config)
+        out = Path(self.out or f"runs/rl/{cfg.goal.replace(' ', '_')}-{cfg.reward}-{cfg.seed}")
+        summary = train(cfg, out, fresh=self.fresh)
+        print(f"{cfg.goal} with the {cfg.reward} reward, {summary['env_steps']} env steps: oracle episode reward "
+              f"{summary['final_mean']:.1f} +- {summary['final_se']:.1f}, success {summary['final_success_rate']:.2f} "
+              f"over {summary['final_episodes']} episodes")
+        print(f"wrote {out}/ (policy/, eval.csv, summary.json, tb/)")
+        return 0
+
+
+@dataclass
+class Rollout:
+    """Run a trained policy (or 'random:GOAL') and report the oracle episode reward."""
+
+    policy: str = field(metadata={"positional": True})  # a policy folder written by zsrm train, or random:GOAL
+    episodes: int = 10  # seeded episodes
+    seed: int = 0  # evaluation seed
+    spread: Literal["seen", "unseen"] = "seen"  # start-state spread: one block width (seen) or two (unseen)
+    gif: str | None = None  # write a GIF of the first episode here
+    out: str | None = None  # JSON path for the result
+
+    def run(self) -> int:
+        from zsrm.rl.evaluate import rollout
+
+        result = rollout(self.policy, self.episodes, self.seed, self.spread, self.gif)
+        print(f"oracle episode reward {result['mean']:.1f} +- {result['se']:.1f}, "
+              f"success {result['success_rate']:.2f} over {self.episodes} episodes")
+        if self.gif:
+            print(f"wrote {self.gif}")
+        if self.out:
+            Path(self.out).parent.mkdir(parents=True, exist_ok=True)
+            Path(self.out).write_text(json.dumps(result, indent=2) + "\n")
+            print(f"wrote {self.out}")
+        return 0
+
+
+@dataclass
+class Sweep:
+    """Train tasks x rewards x seeds on Ray Tune (resumable), then gather the summary."""
+
+    tasks: tuple[str, ...] = SWEEP_TASKS  # catalogue tasks or goal sentences
+    rewards: tuple[str, ...] = ("oracle", "zsrm", "random")  # rewards, of: oracle, zsrm, random
+    seeds: tuple[int, ...] = (0, 1, 2)  # seeds per task and reward
+    root: str = "runs/rl"  # one folder per trial under here (shared storage on a cluster)
+    steps: int = 300_000  # env steps per trial
+    num_cpus: int = 2  # CPUs of the local Ray (one trial per CPU)
+    address: str | None = None  # a Ray cluster to join instead (auto, or ray://HOST:PORT)
+    out: str = "results/rl/learning.json"  # the gathered summary (JSON)
+
+    def run(self) -> int:
+        from zsrm.rl.sweep import gather, sweep
+
+        unknown = set(self.rewards) - set(REWARDS)
+        if unknown:
+            raise ValueError(f"unknown rewards {', '.join(sorted(unknown))}; choose from {', '.join(REWARDS)}")
+        ran = sweep(self.root, self.tasks, self.rewards, self.seeds, {"steps": self.steps},
+                    num_cpus=self.num_cpus, address=self.address)
+        print(f"ran {len(ran)} trial(s); the others were finished already")
+        summary = gather(self.root)
+        Path(self.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(self.out).write_text(json.dumps(summary, indent=2) + "\n")
+        for task, rewards in summary.items():
+            print(task + ": " + ", ".join(f"{r} {v['final_mean']:.1f}+-{v['final_se']:.1f} ({v['seeds']} seeds)"
+                                          for r, v in rewards.items()))
+        print(f"wrote {self.out}")
+        return 0

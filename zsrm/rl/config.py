@@ -1,0 +1,113 @@
+"""Settings of one PPO run (``zsrm train``), written once as a dataclass (CleanRL's ``Args``).
+
+Two presets: ``cpu`` fits the 300k-step budget of a 2-core machine; ``paper`` is the paper's
+200k steps per task with more envs and bigger batches for a machine with more cores.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Literal
+
+REWARDS = ("oracle", "zsrm", "random")
+
+
+@dataclass
+class TrainConfig:
+    goal: str = "stack"
+    """goal sentence or catalogue task name (stack, place_right, push_close, ...)"""
+    reward: Literal["oracle", "zsrm", "random"] = "oracle"
+    """reward the policy learns from: oracle (privileged), zsrm (the full reward model), random (no learning)"""
+    seed: int = 0
+    """seed of the policy, the training envs and the evaluation envs"""
+    steps: int = 300_000
+    """environment (control) steps to train for; an agent step covers `action_repeat` of them"""
+    reward_model: str = "student"
+    """for --reward zsrm: the model folder (zsrm finetune) or 'student', the shipped student"""
+    zsrm_output: Literal["binary", "margin"] = "binary"
+    """for --reward zsrm: binary (the paper's), or margin (dense: goal score minus best negative)"""
+    vlm: str = "scene"
+    """VLM whose frozen image trunk (its Grad-CAM layer) the policy sees through"""
+    n_envs: int = 8
+    """parallel training envs (one process, one batched reward call per step)"""
+    action_repeat: int = 2
+    """control steps per agent decision; only the last frame is rendered"""
+    image_size: int = 64
+    """camera image side in pixels"""
+    keypoints: int = 32
+    """spatial-softmax keypoints the policy reads from the VLM feature map"""
+    pixels: bool = True
+    """also a small CNN on the raw frame, trained by RL (sees the gripper, which the VLM hardly does)"""
+    n_steps: int = 128
+    """PPO rollout length per env"""
+    batch_size: int = 256
+    """PPO minibatch size"""
+    n_epochs: int = 4
+    """PPO epochs per rollout"""
+    learning_rate: float = 3e-4
+    """Adam learning rate"""
+    gamma: float = 0.98
+    """discount per agent decision"""
+    gae_lambda: float = 0.95
+    """GAE lambda"""
+    ent_coef: float = 0.0
+    """entropy bonus"""
+    clip_range: float = 0.2
+    """PPO clip range"""
+    eval_every: int = 20_000
+    """environment steps between evaluations"""
+    eval_episodes: int = 10
+    """episodes per evaluation, on separate envs with their own seeds"""
+    eval_deterministic: bool = False
+    """evaluate the policy's mean action instead of sampling it (the grip's hysteresis makes an
+    early mean action that never crosses a threshold score 0 while the sampled policy succeeds)"""
+    checkpoint_every: int = 20_000
+    """environment steps between checkpoints a killed run resumes from"""
+    threads: int = 1
+    """torch threads"""
+
+    def __post_init__(self):
+        if self.reward not in REWARDS:
+            raise ValueError(f"unknown reward {self.reward!r}; choose one of {', '.join(REWARDS)}")
+        if self.zsrm_output not in ("binary", "margin"):
+            raise ValueError(f"unknown zsrm output {self.zsrm_output!r}; choose binary or margin")
+        for name in ("steps", "n_envs", "action_repeat", "n_steps", "batch_size", "n_epochs", "eval_every",
+                     "eval_episodes", "checkpoint_every", "threads", "keypoints"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if 100 % self.action_repeat:
+            raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
+
+    @property
+    def episode_decisions(self) -> int:
+        """Agent steps per 100-step episode."""
+        return 100 // self.action_repeat
+
+    def identity(self) -> dict:
+        """The settings that define the run (a checkpoint resumes only under the same ones)."""
+        d = asdict(self)
+        for k in ("steps", "eval_every", "eval_deterministic", "checkpoint_every", "threads"):
+            d.pop(k)
+        return d
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrainConfig":
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown training settings: {', '.join(sorted(unknown))}")
+        return cls(**d)
+
+
+PRESETS: dict[str, dict] = {
+    "cpu": {},
+    "paper": {"steps": 200_000, "n_envs": 16, "n_steps": 256, "batch_size": 512},
+}
+
+
+def preset(name: str, **overrides) -> TrainConfig:
+    if name not in PRESETS:
+        raise ValueError(f"unknown config {name!r}; choose one of {', '.join(PRESETS)}")
+    return replace(TrainConfig(), **{**PRESETS[name], **overrides})

@@ -1,0 +1,131 @@
+"""The oracle metric of a policy on separate evaluation envs with their own seeds, and
+``zsrm rollout`` (a saved or random policy, with a GIF of its first episode).
+
+The oracle episode reward is the number of the episode's 100 control steps in which the goal
+relation holds (paper 3.2): it reads the true state and is used for evaluation only.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from zsrm.envs.rollout import run_vec_episodes
+from zsrm.rl.config import TrainConfig
+from zsrm.rl.envs import goal_camera, make_vec
+
+EVAL_SEED = 1_000_000  # evaluation envs: seeds far from the training envs'
+
+
+def eval_seed(seed: int) -> int:
+    return EVAL_SEED + 1000 * seed
+
+
+def mean_se(values) -> tuple[float, float]:
+    """Mean and standard error of the mean (0 for a single value)."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return float("nan"), float("nan")
+    se = v.std(ddof=1) / np.sqrt(v.size) if v.size > 1 else 0.0
+    return float(v.mean()), float(se)
+
+
+def evaluate(act, cfg: TrainConfig, episodes: int, seed: int, spread: str = "seen", wrap=None) -> dict:
+    """Mean and standard error of the oracle episode reward over ``episodes`` seeded episodes,
+    one env each. ``wrap`` turns the image VecEnv into what ``act`` reads (e.g.
+    :class:`~zsrm.rl.features.VecImageFeatures`)."""
+    venv = make_vec(cfg, episodes, eval_seed(seed), spread)
+    if wrap is not None:
+        venv = wrap(venv)
+    try:
+        out = run_vec_episodes(venv, act)
+    finally:
+        venv.close()
+    mean, se = mean_se(out["episode_rewards"])
+    return {"mean": mean, "se": se, "success_rate": float(np.mean(out["successes"])), **out}
+
+
+def random_actions(action_space, seed: int) -> Callable[[dict], np.ndarray]:
+    """A uniform random policy over the action box (the `random` baseline)."""
+    rng = np.random.default_rng(seed)
+
+    def act(obs):
+        n = len(next(iter(obs.values())))
+        return rng.uniform(action_space.low, action_space.high, (n, *action_space.shape)).astype(np.float32)
+
+    return act
+
+
+def rollout(policy: str | Path, episodes: int = 10, seed: int = 0, spread: str = "seen",
+            gif: str | Path | None = None) -> dict:
+    """The oracle episode reward of a saved policy (a folder written by ``zsrm train``) or of
+    ``"random:GOAL"`` over seeded episodes; with ``gif``, a GIF of the first episode."""
+    from zsrm.rl.features import VecImageFeatures
+    from zsrm.rl.policy import PolicyBundle
+    from zsrm.vlm import load_vlm
+
+    if isinstance(policy, str) and policy.startswith("random:"):
+        cfg = TrainConfig(goal=policy.split(":", 1)[1], reward="random")
+        probe = make_vec(cfg, 1, 0)
+        act, features = random_actions(probe.action_space, seed), None
+        probe.close()
+    else:
+        bundle = PolicyBundle.load(policy)
+        cfg, vlm = bundle.cfg, load_vlm(bundle.cfg.vlm)
+
+        def act(obs):
+            return bundle.act(obs, deterministic=cfg.eval_deterministic)
+
+        def features(venv):
+            return VecImageFeatures(venv, vlm, goal_camera(cfg.goal))
+
+    frames = []
+    if gif:
+        record = FirstEpisodeFrames(goal_camera(cfg.goal), frames)
+        wrap = (lambda v: features(record.wrap(v))) if features else record.wrap
+    else:
+        wrap = features
+    result = evaluate(act, cfg, episodes, seed, spread, wrap=wrap)
+    if gif:
+        write_gif(frames, gif)
+        result["gif"] = str(gif)
+    return result
+
+
+class FirstEpisodeFrames:
+    """Keeps the camera frames of the first env's first episode of a VecEnv it wraps."""
+
+    def __init__(self, camera: str, frames: list):
+        self.camera, self.frames, self.done = camera, frames, False
+
+    def wrap(self, venv):
+        from stable_baselines3.common.vec_env import VecEnvWrapper
+
+        keep = self
+
+        class Record(VecEnvWrapper):
+            def reset(self):
+                obs = self.venv.reset()
+                keep.frames.append(np.array(obs[keep.camera][0]))
+                return obs
+
+            def step_wait(self):
+                obs, rewards, dones, infos = self.venv.step_wait()
+                if not keep.done:
+                    last = infos[0]["terminal_observation"] if dones[0] else obs
+                    keep.frames.append(np.array(last[keep.camera][0]))
+                    keep.done = bool(dones[0])
+                return obs, rewards, dones, infos
+
+        return Record(venv)
+
+
+def write_gif(frames: list[np.ndarray], path: str | Path, scale: int = 3) -> Path:
+    import imageio.v3 as iio
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    iio.imwrite(path, np.stack([np.kron(f, np.ones((scale, scale, 1), np.uint8)) for f in frames]),
+                duration=80, loop=0)
+    return path

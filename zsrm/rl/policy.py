@@ -1,0 +1,96 @@
+"""Trained policies and checkpoints on disk: safetensors + JSON, never pickle.
+
+A policy folder holds ``model.safetensors`` (the SB3 actor-critic's weights) and
+``config.json`` (kind ``zsrm-policy``, the TrainConfig, the observation and action shapes), so
+it loads without the env that trained it; the frozen VLM it sees through is named in the
+config (``vlm``) and loaded from there.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3.common.policies import MultiInputActorCriticPolicy
+
+from zsrm.rl.config import TrainConfig
+from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor
+from zsrm.vlm.optim import load_optimizer, read_checkpoint_state
+from zsrm.vlm.optim import save_checkpoint as save_checkpoint_folder
+from zsrm.vlm.registry import CONFIG_FILE, WEIGHTS_FILE, load_weights, read_config, save_folder
+
+KIND = "zsrm-policy"
+
+
+def policy_kwargs(cfg: TrainConfig) -> dict:
+    return dict(features_extractor_class=KeypointExtractor,
+                features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels),
+                net_arch=dict(pi=[256], vf=[256]), normalize_images=False)
+
+
+class PolicyBundle:
+    """An SB3 actor-critic and the settings it was trained with."""
+
+    def __init__(self, policy: MultiInputActorCriticPolicy, cfg: TrainConfig):
+        self.policy, self.cfg = policy, cfg
+
+    def save(self, folder: str | Path) -> None:
+        # The actor and critic share one feature extractor: save_folder keeps tied tensors once.
+        config = {"kind": KIND, "config": self.cfg.to_dict(),
+                  "observation_shape": list(self.policy.observation_space[FEATURES_KEY].shape),
+                  "image_size": int(self.policy.observation_space[IMAGE_KEY].shape[-1]),
+                  "action_dim": int(self.policy.action_space.shape[0])}
+        save_folder(folder, config, {WEIGHTS_FILE: self.policy})
+
+    @classmethod
+    def load(cls, folder: str | Path) -> "PolicyBundle":
+        config = read_config(folder, kind=KIND)
+        try:
+            cfg = TrainConfig.from_dict(config["config"])
+            shape, size, action_dim = tuple(config["observation_shape"]), int(config["image_size"]), int(config["action_dim"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"{Path(folder) / CONFIG_FILE} is not a zsrm policy config: {err}") from None
+        obs_space = gym.spaces.Dict({FEATURES_KEY: gym.spaces.Box(0.0, np.inf, shape, np.float32),
+                                     IMAGE_KEY: gym.spaces.Box(0, 255, (3, size, size), np.uint8)})
+        act_space = gym.spaces.Box(-1.0, 1.0, (action_dim,), np.float32)
+        policy = MultiInputActorCriticPolicy(obs_space, act_space, lambda _: 0.0, **policy_kwargs(cfg))
+        try:
+            load_weights(policy, folder)
+        except RuntimeError as err:
+            raise ValueError(f"{Path(folder) / WEIGHTS_FILE} does not match the policy its config describes: "
+                             f"{str(err).splitlines()[0]}") from None
+        except (FileNotFoundError, ValueError):
+            raise
+        except Exception as err:  # safetensors raises its own error types for a damaged file
+            raise ValueError(f"{Path(folder) / WEIGHTS_FILE} is not a readable safetensors file: {err}") from None
+        return cls(policy.eval(), cfg)
+
+    @torch.no_grad()
+    def act(self, observation: dict, deterministic: bool = True) -> np.ndarray:
+        """Actions ``(N, action_dim)`` for a batch of observations of :class:`VecImageFeatures`."""
+        actions, _ = self.policy.predict(observation, deterministic=deterministic)
+        return actions
+
+
+def save_checkpoint(folder: Path, model, cfg: TrainConfig, env_steps: int, rows: list[dict]) -> None:
+    """Policy weights, optimiser and the step count, swapped in atomically."""
+    state = {"config": cfg.identity(), "env_steps": int(env_steps), "rows": rows}
+    save_checkpoint_folder(folder, lambda tmp: PolicyBundle(model.policy, cfg).save(tmp),
+                           model.policy.optimizer, state)
+
+
+def load_checkpoint(folder: Path, cfg: TrainConfig) -> dict | None:
+    """The checkpoint's state plus ``restore(model)``, or None when there is none."""
+    if not (folder / "state.json").is_file():
+        return None
+    state = read_checkpoint_state(folder, cfg.identity())
+    bundle = PolicyBundle.load(folder)
+
+    def restore(model):
+        model.policy.load_state_dict(bundle.policy.state_dict())
+        load_optimizer(folder, model.policy.optimizer)
+        model.num_timesteps = state["env_steps"] // cfg.action_repeat
+
+    state["restore"] = restore
+    return state

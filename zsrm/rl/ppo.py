@@ -1,0 +1,172 @@
+"""``zsrm train``: PPO from pixels with a reward from a goal sentence.
+
+One run writes to its folder::
+
+    config.json     the TrainConfig
+    eval.csv        env step, oracle episode reward (mean, s.e.), success rate, train reward
+    tb/             TensorBoard logs of the same and of PPO's losses
+    checkpoint/     policy + optimiser + step: a killed run resumes here with the same step count
+    policy/         the trained policy (safetensors + JSON), for ``zsrm rollout``
+    summary.json    the final evaluation
+
+Only images reach the policy and the reward model; the oracle (true state) is read for
+``--reward oracle`` and for evaluation only.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+
+from zsrm.rewards import VecZeroShotReward
+from zsrm.rl.config import TrainConfig
+from zsrm.rl.envs import goal_camera, make_reward, make_vec, task_entry
+from zsrm.rl.evaluate import evaluate, random_actions
+from zsrm.rl.features import VecImageFeatures
+from zsrm.rl.policy import PolicyBundle, load_checkpoint, policy_kwargs, save_checkpoint
+from zsrm.vlm import load_vlm
+
+EVAL_FIELDS = ("env_steps", "mean", "se", "success_rate", "train_reward", "wall_s")
+FINAL_EPISODES = 30
+
+
+def build_ppo(cfg: TrainConfig, venv) -> PPO:
+    return PPO("MultiInputPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+               learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, ent_coef=cfg.ent_coef,
+               clip_range=cfg.clip_range, policy_kwargs=policy_kwargs(cfg), seed=cfg.seed, device="cpu", verbose=0)
+
+
+class EvalAndCheckpoint(BaseCallback):
+    """Every ``eval_every`` env steps: the oracle metric on the eval envs (CSV + TensorBoard);
+    every ``checkpoint_every``: a checkpoint. Also drives the progress bar."""
+
+    def __init__(self, cfg: TrainConfig, out: Path, vlm, rows: list[dict], progress, on_eval=None):
+        super().__init__()
+        self.cfg, self.out, self.vlm, self.rows, self.progress = cfg, out, vlm, rows, progress
+        self.on_eval = on_eval
+        self.next_eval = (rows[-1]["env_steps"] if rows else 0) + cfg.eval_every
+        self.next_ckpt = self.next_eval - cfg.eval_every + cfg.checkpoint_every
+        self.rewards: list[float] = []
+        self.t0 = time.time() - (rows[-1]["wall_s"] if rows else 0.0)
+
+    def env_steps(self) -> int:
+        return int(self.num_timesteps * self.cfg.action_repeat)
+
+    def _on_step(self) -> bool:
+        self.rewards.append(float(np.mean(self.locals["rewards"])))
+        self.progress.n = min(self.env_steps(), self.cfg.steps)
+        self.progress.refresh()
+        if self.env_steps() >= self.next_eval:
+            self.evaluate()
+            self.next_eval += self.cfg.eval_every
+        if self.env_steps() >= self.next_ckpt:
+            save_checkpoint(self.out / "checkpoint", self.model, self.cfg, self.env_steps(), self.rows)
+            self.next_ckpt += self.cfg.checkpoint_every
+        return True
+
+    def evaluate(self):
+        cfg = self.cfg
+        result = evaluate(policy_act(self.model, cfg.eval_deterministic), cfg, cfg.eval_episodes, cfg.seed,
+                          wrap=lambda v: VecImageFeatures(v, self.vlm, goal_camera(cfg.goal)))
+        # Mean reward per decision over the interval, times the decisions of an episode.
+        train_reward = float(np.mean(self.rewards) * self.cfg.episode_decisions) if self.rewards else 0.0
+        self.rewards = []
+        row = {"env_steps": self.env_steps(), "mean": result["mean"], "se": result["se"],
+               "success_rate": result["success_rate"], "train_reward": train_reward,
+               "wall_s": round(time.time() - self.t0, 1)}
+        self.rows.append(row)
+        for k in ("mean", "success_rate", "train_reward"):
+            self.logger.record(f"eval/{k}", row[k])
+        self.logger.dump(self.num_timesteps)
+        write_eval_csv(self.out / "eval.csv", self.rows)
+        self.progress.set_postfix(oracle=f"{row['mean']:.1f}", success=f"{row['success_rate']:.2f}")
+        if self.on_eval is not None:
+            self.on_eval(row)
+
+
+def policy_act(model: PPO, deterministic: bool):
+    def act(obs):
+        return model.predict(obs, deterministic=deterministic)[0]
+    return act
+
+
+def write_eval_csv(path: Path, rows: list[dict]) -> None:
+    tmp = path.with_suffix(".csv.tmp")
+    with tmp.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=EVAL_FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+    tmp.replace(path)
+
+
+def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool = True, on_eval=None) -> dict:
+    """Train (or resume) one PPO run; returns the summary written to ``out/summary.json``.
+
+    ``on_eval(row)`` is called after each evaluation (the sweep reports it to Ray Tune)."""
+    from stable_baselines3.common.logger import configure
+    from tqdm import tqdm
+
+    out = Path(out)
+    torch.set_num_threads(cfg.threads)
+    out.mkdir(parents=True, exist_ok=True)
+    if (out / "summary.json").is_file() and not fresh:
+        summary = json.loads((out / "summary.json").read_text())
+        if summary.get("config", {}) == cfg.to_dict():
+            return summary  # finished run: nothing to do
+    (out / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
+    if cfg.reward == "random":
+        return finish_random(cfg, out)
+
+    vlm = load_vlm(cfg.vlm)
+    camera = goal_camera(cfg.goal)
+    done_steps, rows = 0, []
+    state = None if fresh else load_checkpoint(out / "checkpoint", cfg)
+    if state is not None:
+        done_steps, rows = state["env_steps"], state["rows"]
+    venv = make_vec(cfg, cfg.n_envs, cfg.seed * 10_000 + done_steps)
+    venv = VecImageFeatures(VecZeroShotReward(venv, make_reward(cfg), task_entry(cfg.goal).goal), vlm, camera)
+    model = build_ppo(cfg, venv)
+    if state is not None:
+        state["restore"](model)
+    model.set_logger(configure(str(out / "tb"), ["tensorboard"]))
+    # PPO stops only at a rollout's end: train whole rollouts, never past cfg.steps.
+    rollout = cfg.n_envs * cfg.n_steps * cfg.action_repeat
+    remaining = max(0, max(rollout, cfg.steps // rollout * rollout) - done_steps)
+    with tqdm(total=cfg.steps, initial=done_steps, unit="step", desc=f"train {cfg.reward} {cfg.goal}",
+              disable=not progress, smoothing=0.05) as bar:
+        callback = EvalAndCheckpoint(cfg, out, vlm, rows, bar, on_eval)
+        if remaining:
+            model.learn(remaining // cfg.action_repeat, callback=callback, reset_num_timesteps=state is None)
+        final = evaluate(policy_act(model, cfg.eval_deterministic), cfg, FINAL_EPISODES, cfg.seed,
+                         wrap=lambda v: VecImageFeatures(v, vlm, camera))
+    venv.close()
+    PolicyBundle(model.policy, cfg).save(out / "policy")
+    save_checkpoint(out / "checkpoint", model, cfg, callback.env_steps(), rows)
+    return write_summary(cfg, out, final, rows, callback.env_steps())
+
+
+def finish_random(cfg: TrainConfig, out: Path) -> dict:
+    """The uniform random policy's oracle metric (the `random` baseline of the results)."""
+    from zsrm.rl.envs import task_entry  # noqa: F401  (validates the goal)
+
+    probe = make_vec(cfg, 1, 0)
+    act = random_actions(probe.action_space, cfg.seed)
+    probe.close()
+    final = evaluate(act, cfg, FINAL_EPISODES, cfg.seed)
+    return write_summary(cfg, out, final, [], 0)
+
+
+def write_summary(cfg: TrainConfig, out: Path, final: dict, rows: list[dict], env_steps: int) -> dict:
+    summary = {"config": cfg.to_dict(), "env_steps": env_steps, "final_mean": final["mean"], "final_se": final["se"],
+               "final_success_rate": final["success_rate"], "final_episodes": len(final["episode_rewards"]),
+               "final_episode_rewards": final["episode_rewards"], "curve": rows}
+    tmp = out / "summary.json.tmp"
+    tmp.write_text(json.dumps(summary, indent=2) + "\n")
+    tmp.replace(out / "summary.json")
+    return summary

@@ -1,0 +1,126 @@
+"""``zsrm sweep``: tasks x rewards x seeds of ``zsrm train`` on Ray Tune.
+
+Each trial is one :func:`~zsrm.rl.ppo.train` run in its own folder
+``ROOT/<task>-<reward>-<seed>/`` (the run's own checkpoints, curve and summary), so:
+
+* a finished trial (its ``summary.json`` made with the same settings) is skipped;
+* a killed trial resumes from its last checkpoint with the same step count;
+* trials run in parallel on a local Ray (``ray.init(num_cpus=N)``) or spread over a cluster
+  (``address="auto"`` or ``ray://HOST:PORT``); on a cluster ROOT must be shared storage.
+
+:func:`gather` then reads every run folder into one summary: per task and reward the mean
+and standard error over seeds of each run's final oracle episode reward, and the curves.
+
+>>> from zsrm.rl.sweep import trial_grid
+>>> [t["name"] for t in trial_grid(["stack"], ["oracle", "zsrm"], [0])]
+['stack-oracle-0', 'stack-zsrm-0']
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from zsrm.rl.config import TrainConfig
+from zsrm.rl.evaluate import mean_se
+
+
+def trial_grid(tasks, rewards, seeds, overrides: dict | None = None) -> list[dict]:
+    """One trial per task x reward x seed: its name and its TrainConfig as a dict."""
+    trials = []
+    for task in tasks:
+        for reward in rewards:
+            for seed in seeds:
+                cfg = TrainConfig(**{**(overrides or {}), "goal": task, "reward": reward, "seed": int(seed)})
+                trials.append({"name": f"{task}-{reward}-{seed}", "config": cfg.to_dict()})
+    return trials
+
+
+def is_finished(folder: Path, config: dict) -> bool:
+    path = folder / "summary.json"
+    if not path.is_file():
+        return False
+    try:
+        return json.loads(path.read_text()).get("config") == config
+    except json.JSONDecodeError:
+        return False
+
+
+def run_trial(trial: dict) -> dict:
+    """Ray Tune's trainable: train (or resume) one run, reporting each evaluation to Tune."""
+    import torch
+    from ray import tune
+
+    from zsrm.rl.ppo import train
+
+    torch.set_num_threads(1)
+    cfg = TrainConfig.from_dict(trial["config"])
+    summary = train(cfg, Path(trial["root"]) / trial["name"], progress=False,
+                    on_eval=lambda row: tune.report({**row, "final": 0}))
+    result = {"env_steps": summary["env_steps"], "mean": summary["final_mean"], "final": 1}
+    tune.report(result)
+    return result
+
+
+def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | None = None, num_cpus: int = 2,
+          address: str | None = None, cpus_per_trial: float = 1.0) -> list[str]:
+    """Run every unfinished trial of the grid on Ray Tune; returns the names that ran."""
+    import ray
+    from ray import tune
+
+    root = Path(root).resolve()
+    root.mkdir(parents=True, exist_ok=True)
+    todo = [t for t in trial_grid(tasks, rewards, seeds, overrides)
+            if not is_finished(root / t["name"], t["config"])]
+    if not todo:
+        return []
+    for t in todo:
+        t["root"] = str(root)
+    if address:
+        ray.init(address=address, ignore_reinit_error=True, log_to_driver=False)
+    else:
+        ray.init(num_cpus=num_cpus, include_dashboard=False, ignore_reinit_error=True, log_to_driver=False)
+    try:
+        trainable = tune.with_resources(run_trial, {"cpu": cpus_per_trial})
+        tuner = tune.Tuner(trainable, param_space=tune.grid_search(todo),
+                           tune_config=tune.TuneConfig(max_concurrent_trials=max(1, int(num_cpus // cpus_per_trial))),
+                           run_config=tune.RunConfig(name="zsrm-sweep", storage_path=str(root / "_ray"),
+                                                     verbose=1))
+        tuner.fit()
+    finally:
+        ray.shutdown()
+    return [t["name"] for t in todo]
+
+
+def gather(root: str | Path) -> dict:
+    """``<task>.<reward>.{final_mean, final_se, seeds, steps, curve}`` from every finished run
+    under ``root``; the curve is the mean and s.e. over seeds at each evaluation step."""
+    runs: dict[tuple[str, str], list[dict]] = {}
+    for path in sorted(Path(root).glob("*/summary.json")):
+        summary = json.loads(path.read_text())
+        cfg = summary["config"]
+        runs.setdefault((cfg["goal"], cfg["reward"]), []).append(summary)
+    out: dict = {}
+    for (task, reward), summaries in sorted(runs.items()):
+        finals = [s["final_mean"] for s in summaries]
+        mean, se = mean_se(finals)
+        out.setdefault(task, {})[reward] = {
+            "final_mean": mean, "final_se": se, "seeds": len(summaries),
+            "steps": max(s["env_steps"] for s in summaries),
+            "final_per_seed": finals,
+            "final_success_rate": float(np.mean([s["final_success_rate"] for s in summaries])),
+            "curve": mean_curve([s["curve"] for s in summaries]),
+        }
+    return out
+
+
+def mean_curve(curves: list[list[dict]]) -> list[dict]:
+    """Mean and s.e. over runs at each evaluation step that every run reached."""
+    steps = sorted(set.intersection(*[{row["env_steps"] for row in c} for c in curves])) if curves else []
+    rows = []
+    for step in steps:
+        values = [next(r["mean"] for r in c if r["env_steps"] == step) for c in curves]
+        mean, se = mean_se(values)
+        rows.append({"env_steps": step, "mean": mean, "se": se})
+    return rows
