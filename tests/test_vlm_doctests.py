@@ -4,7 +4,7 @@ import importlib
 
 import pytest
 
-MODULES = ["zsrm.vlm.base", "zsrm.vlm.losses", "zsrm.vlm.presence", "zsrm.vlm.scene", "zsrm.vlm.registry",
+MODULES = ["zsrm.vlm.base", "zsrm.vlm.files", "zsrm.vlm.losses", "zsrm.vlm.presence", "zsrm.vlm.scene", "zsrm.vlm.registry",
            "zsrm.vlm.text_cache"]
 
 

@@ -27,6 +27,7 @@ True
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -34,11 +35,30 @@ from torch import nn
 
 from zsrm.fullmodel.text import RoleTextFeatures, load_frozen_reference, portable_spec, stored_spec
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel
-from zsrm.vlm.registry import load_folder, load_weights, read_config, register_kind, save_folder
+from zsrm.vlm.registry import build_model, load_folder, load_weights, read_config, register_kind, save_folder
 from zsrm.vlm.text_cache import TextEmbeddingCache
 
 BACKEND = "zsrm-adapted"
 ADAPTERS_FILE = "adapters.safetensors"
+
+
+@dataclass
+class AdaptedFolder:
+    """config.json of a saved adapted VLM (its base VLM is saved in base/, in its own format)."""
+
+    backend: str
+    grid: int  # image adapter: avg-pool grid of the trunk's map (0: none)
+    text_hidden: int  # text adapter: hidden units (0: none)
+    base_backend: str
+    meta: dict | None = None
+    reference: str | None = None  # spec of the frozen VLM the text adapter reads (with text_hidden)
+    reference_is_folder: bool = False
+
+    def __post_init__(self):
+        if self.grid < 0 or self.text_hidden < 0:
+            raise ValueError(f"grid and text_hidden must be >= 0, got {self.grid} and {self.text_hidden}")
+        if self.text_hidden and self.reference is None:
+            raise ValueError("a text adapter (text_hidden > 0) needs 'reference', the VLM it reads texts through")
 
 
 class AdaptedVLM(VisionLanguageModel):
@@ -147,13 +167,14 @@ class AdaptedVLM(VisionLanguageModel):
 
     @classmethod
     def from_folder(cls, folder: str | Path, device: str | torch.device = "cpu") -> "AdaptedVLM":
-        cfg = read_config(folder, kind=BACKEND)
+        cfg = read_config(folder, kind=BACKEND, schema=AdaptedFolder)
         reference = spec = None
-        if cfg["text_hidden"]:
-            spec = stored_spec(cfg["reference"], cfg.get("reference_is_folder", False), folder)
+        if cfg.text_hidden:
+            spec = stored_spec(cfg.reference, cfg.reference_is_folder, folder)
             reference = load_frozen_reference(spec, device, f"the model in {folder} reads texts through")
-        model = cls(load_folder(Path(folder) / "base", device), grid=cfg["grid"], text_hidden=cfg["text_hidden"],
-                    reference=reference, reference_spec=spec, meta=cfg.get("meta"))
+        base = load_folder(Path(folder) / "base", device)
+        model = build_model(folder, lambda: cls(base, grid=cfg.grid, text_hidden=cfg.text_hidden, reference=reference,
+                                                reference_spec=spec, meta=cfg.meta))
         load_weights(model._adapters(), folder, ADAPTERS_FILE, device=device)
         return model.to(device).eval()
 

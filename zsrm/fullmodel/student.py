@@ -26,8 +26,8 @@ from torch import nn
 
 from zsrm.fullmodel.text import RoleTextFeatures, load_frozen_reference, portable_spec, stored_spec
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel, check_image_tower, pixels_from_images
-from zsrm.vlm.registry import (WEIGHTS_FILE, folder_kind, load_weights, read_config, register_kind, register_shipped,
-                               save_folder)
+from zsrm.vlm.registry import (WEIGHTS_FILE, build_model, folder_kind, load_weights, read_config, register_kind,
+                               register_shipped, save_folder)
 from zsrm.vlm.text_cache import TextEmbeddingCache
 
 BACKEND = "zsrm-student"
@@ -47,6 +47,17 @@ class StudentConfig:
 
     def __post_init__(self):
         check_image_tower(self, stages=4, multiple=16)
+
+
+@dataclass
+class StudentFolder:
+    """config.json of a saved student."""
+
+    backend: str
+    config: StudentConfig
+    text_vlm: str  # spec of the VLM whose frozen text tower it reads through
+    text_vlm_is_folder: bool = False
+    meta: dict | None = None
 
 
 class StudentRewardNet(VisionLanguageModel):
@@ -118,11 +129,11 @@ class StudentRewardNet(VisionLanguageModel):
     @classmethod
     def from_folder(cls, folder: str | Path, device: str | torch.device = "cpu",
                     text_vlm: VisionLanguageModel | None = None) -> "StudentRewardNet":
-        cfg = read_config(folder, kind=BACKEND)
-        spec = stored_spec(cfg["text_vlm"], cfg.get("text_vlm_is_folder", False), folder)
+        cfg = read_config(folder, kind=BACKEND, schema=StudentFolder)
+        spec = stored_spec(cfg.text_vlm, cfg.text_vlm_is_folder, folder)
         if text_vlm is None:
             text_vlm = load_frozen_reference(spec, device, f"the student in {folder} embeds texts with")
-        model = cls(StudentConfig(**cfg["config"]), text_vlm, spec, meta=cfg.get("meta"))
+        model = build_model(folder, lambda: cls(cfg.config, text_vlm, spec, meta=cfg.meta))
         load_weights(model, folder, device=device)
         return model.to(device).eval()
 

@@ -16,9 +16,9 @@ from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor
-from zsrm.vlm.optim import load_optimizer, read_checkpoint_state
+from zsrm.vlm.optim import check_optimizer, load_optimizer, read_checkpoint_state
 from zsrm.vlm.optim import save_checkpoint as save_checkpoint_folder
-from zsrm.vlm.registry import CONFIG_FILE, WEIGHTS_FILE, load_weights, read_config, save_folder
+from zsrm.vlm.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
 
 KIND = "zsrm-policy"
 
@@ -45,25 +45,25 @@ class PolicyBundle:
 
     @classmethod
     def load(cls, folder: str | Path) -> "PolicyBundle":
-        config = read_config(folder, kind=KIND)
-        try:
-            cfg = TrainConfig.from_dict(config["config"])
-            shape, size, action_dim = tuple(config["observation_shape"]), int(config["image_size"]), int(config["action_dim"])
-        except (KeyError, TypeError, ValueError) as err:
-            raise ValueError(f"{Path(folder) / CONFIG_FILE} is not a zsrm policy config: {err}") from None
-        obs_space = gym.spaces.Dict({FEATURES_KEY: gym.spaces.Box(0.0, np.inf, shape, np.float32),
-                                     IMAGE_KEY: gym.spaces.Box(0, 255, (3, size, size), np.uint8)})
-        act_space = gym.spaces.Box(-1.0, 1.0, (action_dim,), np.float32)
-        policy = MultiInputActorCriticPolicy(obs_space, act_space, lambda _: 0.0, **policy_kwargs(cfg))
-        try:
-            load_weights(policy, folder)
-        except RuntimeError as err:
-            raise ValueError(f"{Path(folder) / WEIGHTS_FILE} does not match the policy its config describes: "
-                             f"{str(err).splitlines()[0]}") from None
-        except (FileNotFoundError, ValueError):
-            raise
-        except Exception as err:  # safetensors raises its own error types for a damaged file
-            raise ValueError(f"{Path(folder) / WEIGHTS_FILE} is not a readable safetensors file: {err}") from None
+        """The policy in ``folder``: its config.json checked against the policy config (keys, types,
+        the TrainConfig), its weights' names, shapes and dtypes against the policy that config
+        describes, before anything is loaded; else one ZsrmFileError naming the file."""
+        config = read_config(folder, kind=KIND, schema={
+            "kind": str, "config": TrainConfig, "observation_shape": tuple[int, ...], "image_size": int,
+            "action_dim": int})
+        shape, size, cfg = config.observation_shape, config.image_size, config.config
+
+        def make():
+            if min((*shape, size, config.action_dim), default=0) < 1:
+                raise ValueError(f"observation_shape, image_size and action_dim must be positive, got "
+                                 f"{list(shape)}, {size} and {config.action_dim}")
+            obs_space = gym.spaces.Dict({FEATURES_KEY: gym.spaces.Box(0.0, np.inf, shape, np.float32),
+                                         IMAGE_KEY: gym.spaces.Box(0, 255, (3, size, size), np.uint8)})
+            act_space = gym.spaces.Box(-1.0, 1.0, (config.action_dim,), np.float32)
+            return MultiInputActorCriticPolicy(obs_space, act_space, lambda _: 0.0, **policy_kwargs(cfg))
+
+        policy = build_model(folder, make)
+        load_weights(policy, folder)  # checks the weights file first (zsrm.vlm.registry.check_weights)
         return cls(policy.eval(), cfg)
 
     @torch.no_grad()
@@ -84,8 +84,9 @@ def load_checkpoint(folder: Path, cfg: TrainConfig) -> dict | None:
     """The checkpoint's state plus ``restore(model)``, or None when there is none."""
     if not (folder / "state.json").is_file():
         return None
-    state = read_checkpoint_state(folder, cfg.identity())
+    state = read_checkpoint_state(folder, cfg.identity(), {"env_steps": int, "rows": list})
     bundle = PolicyBundle.load(folder)
+    check_optimizer(folder, bundle.policy.optimizer)  # before any work: a bad file is one line now
 
     def restore(model):
         model.policy.load_state_dict(bundle.policy.state_dict())

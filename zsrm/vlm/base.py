@@ -180,5 +180,7 @@ def check_image_tower(config, stages: int, multiple: int) -> None:
     config.mean, config.std = tuple(config.mean), tuple(config.std)
     if len(config.widths) != stages:
         raise ValueError(f"widths must have {stages} entries, got {config.widths}")
-    if config.image_size % multiple:
-        raise ValueError(f"image_size must be a multiple of {multiple}, got {config.image_size}")
+    if config.image_size % multiple or config.image_size < multiple:
+        raise ValueError(f"image_size must be a positive multiple of {multiple}, got {config.image_size}")
+    if min(config.widths) < 1 or config.embed_dim < 1:
+        raise ValueError(f"widths and embed_dim must be positive, got {config.widths} and {config.embed_dim}")

@@ -20,13 +20,15 @@ import json
 import logging
 import os
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 from torch import nn
 
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel, pixels_from_images
-from zsrm.vlm.registry import WEIGHTS_FILE, load_weights as load_folder_weights, read_config, register_kind, save_folder
+from zsrm.vlm.registry import WEIGHTS_FILE, build_model, read_config, register_kind, save_folder
+from zsrm.vlm.registry import load_weights as load_folder_weights
 
 CHECKPOINT_SUFFIXES = (".safetensors", ".pt", ".pth", ".bin")
 HF_SAFE_WEIGHTS = "open_clip_model.safetensors"
@@ -43,6 +45,18 @@ def _offline() -> bool:
 
 def looks_like_path(pretrained: str) -> bool:
     return os.sep in pretrained or "/" in pretrained or pretrained.lower().endswith(CHECKPOINT_SUFFIXES)
+
+
+@dataclass
+class OpenClipFolder:
+    """config.json of a saved open_clip model (``model_cfg`` carries a custom architecture)."""
+
+    backend: str
+    model_name: str
+    quick_gelu: bool = False
+    preprocess_cfg: dict | None = None
+    model_cfg: dict | None = None
+    meta: dict | None = None
 
 
 class OpenClipVLM(VisionLanguageModel):
@@ -125,11 +139,14 @@ class OpenClipVLM(VisionLanguageModel):
 
     @classmethod
     def from_folder(cls, folder: str | Path, device: str | torch.device = "cpu") -> "OpenClipVLM":
-        cfg = read_config(folder, kind=cls.backend)
-        _register_model_cfg(cfg["model_name"], cfg.get("model_cfg"))
-        vlm = create_open_clip_vlm(cfg["model_name"], "none", quick_gelu=cfg.get("quick_gelu", False),
-                                   preprocess_cfg=cfg.get("preprocess_cfg"),
-                                   provenance=cfg.get("meta", {}).get("pretrained"))
+        cfg = read_config(folder, kind=cls.backend, schema=OpenClipFolder)
+
+        def make():
+            _register_model_cfg(cfg.model_name, cfg.model_cfg)
+            return create_open_clip_vlm(cfg.model_name, "none", quick_gelu=cfg.quick_gelu,
+                                        preprocess_cfg=cfg.preprocess_cfg, provenance=(cfg.meta or {}).get("pretrained"))
+
+        vlm = build_model(folder, make)
         load_folder_weights(vlm.clip, folder, device=device)
         return vlm.to(device).eval()
 

@@ -28,7 +28,8 @@ import torch
 from torch import nn
 
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel, check_image_tower, pixels_from_images
-from zsrm.vlm.registry import WEIGHTS_FILE, load_weights, read_config, register_kind, register_shipped, save_folder
+from zsrm.vlm.registry import (WEIGHTS_FILE, build_model, load_weights, read_config, register_kind, register_shipped,
+                               save_folder)
 from zsrm.vlm.text_cache import TextEmbeddingCache
 
 # The pretrained scene VLM shipped with zsrm (built by `zsrm pretrain-vlm`), spec "scene".
@@ -67,6 +68,15 @@ class SceneConfig:
         if unknown:
             raise ValueError(f"unknown scene config keys: {', '.join(sorted(unknown))}")
         return cls(**d)
+
+
+@dataclass
+class SceneFolder:
+    """config.json of a saved scene VLM."""
+
+    backend: str
+    config: SceneConfig
+    meta: dict | None = None
 
 
 # Architectures as data (open_clip style). "default" is the shipped model; "tiny" is for tests.
@@ -212,8 +222,8 @@ class SceneVLM(VisionLanguageModel):
 
     @classmethod
     def from_folder(cls, folder: str | Path, device: str | torch.device = "cpu") -> "SceneVLM":
-        cfg = read_config(folder, kind=cls.backend)
-        model = cls(SceneConfig.from_dict(cfg["config"]), meta=cfg.get("meta"))
+        cfg = read_config(folder, kind=cls.backend, schema=SceneFolder)
+        model = build_model(folder, lambda: cls(cfg.config, meta=cfg.meta))
         load_weights(model, folder, device=device)
         return model.to(device).eval()
 
