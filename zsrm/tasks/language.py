@@ -1,40 +1,56 @@
 """Goal sentences and tasks, both ways.
 
+A goal is read by a small deterministic grammar (the words are in :mod:`zsrm.tasks.lexicon`):
+
+    [lead words] OBJECT link OBJECT [and OBJECT] [tail words]
+
+An OBJECT is "[a|an|the] COLOUR [block|cube|puck|object|one]", or several colours with one
+noun ("the red and blue blocks"); a link is filler words ("should be", "right") then exactly
+one relation phrase. "to the red block's right" and "the blue and yellow pucks next to each
+other" are the two other forms. Every word must have a place in the pattern: a sentence with
+a word that has none, or without two objects and a relation, is refused with a
+:class:`GoalError` whose one-line message says what is wrong and, where there is one, the
+nearest goal zsrm does understand. Nothing is guessed.
+
 >>> task = Task.from_text("a yellow block on the right of a red block")
 >>> task.relation, task.objects
 ('right_of', ('yellow', 'red'))
 >>> task.text
 'a yellow block on the right of a red block'
+>>> parse_goal("Put the red block onto the yellow one.").text
+'a red block on top of a yellow block'
+>>> parse_goal("push the blue puck to the yellow puck's left").relation
+'left_of'
 """
 from __future__ import annotations
 
+import difflib
 import re
 from dataclasses import dataclass
 
+from zsrm.tasks.lexicon import (ADJECTIVES, COLOURS, DETERMINERS, EACH_OTHER, LEAD_WORDS, LINK_FILLERS, NEGATIONS,
+                                OTHER_COLOURS, PLACING_VERBS, POSSESSIVE_LINK, POSSESSIVE_SIDES, POSSESSIVE_TAIL, RELATION_PATTERNS,
+                                RELATION_WORDS, SELF_WORDS, SHAPE_WORDS, SHAPES, TAIL_WORDS)
 from zsrm.tasks.relations import RELATIONS
 
-COLOURS = ("red", "green", "yellow", "blue")
-SHAPES = ("block", "puck")
-# Words a user may write for a shape; the canonical one renders.
-SHAPE_WORDS = {"block": "block", "cube": "block", "puck": "puck", "object": None}
+assert set(RELATION_WORDS) == set(RELATION_PATTERNS) == set(RELATIONS)
 
-# Accepted wordings of each relation, longest first when matching.
-RELATION_WORDS = {
-    "left_of": ("on the left of", "to the left of", "left of"),
-    "right_of": ("on the right of", "to the right of", "right of"),
-    "on_top_of": ("on top of", "stacked on", "on"),
-    "below": ("below", "under", "beneath", "underneath"),
-    "in_between": ("in between", "between"),
-    "in_front_of": ("in front of",),
-    "behind": ("behind",),
-    "close_to": ("close to", "near", "next to"),
-    "inside_of": ("inside of", "inside", "in"),
-}
-assert set(RELATION_WORDS) == set(RELATIONS)
+# Why a goal is refused: GoalError.reason is one of these.
+REFUSAL_REASONS = ("empty", "negation", "unknown colour", "unknown object", "no colour", "mixed objects",
+                   "same object", "no object", "one object", "no relation", "object count", "extra words")
 
 
 class GoalError(ValueError):
-    """A goal sentence or task that zsrm cannot understand; the message says what is known."""
+    """A goal sentence or task that zsrm cannot understand; the message says what is known.
+
+    ``reason`` is one of :data:`REFUSAL_REASONS` (None for a bad :class:`Task`) and
+    ``suggestion`` the canonical text of the nearest goal zsrm understands, if there is one.
+    """
+
+    def __init__(self, message: str, reason: str | None = None, suggestion: str | None = None):
+        super().__init__(message)
+        self.reason = reason
+        self.suggestion = suggestion
 
 
 @dataclass(frozen=True)
@@ -86,55 +102,279 @@ class Task:
         return self.text
 
 
-_OBJECT = r"(?:a|an|the)\s+(\w+)\s+(\w+)"
+# --- reading a sentence ------------------------------------------------------------------
+
+_CONTRACTIONS = (
+    (r"\b(it|that|what|there|he|she)'s\b", r"\1 is"), (r"\blet's\b", "let us"), (r"\bcan't\b", "can not"),
+    (r"\bwon't\b", "will not"), (r"n't\b", " not"), (r"'d\b", " would"), (r"'m\b", " am"), (r"'ll\b", " will"),
+    (r"'re\b", " are"), (r"'ve\b", " have"), (r"(\w)'s\b", r"\1 's"),
+)
 
 
-def _parse_object(colour: str, shape_word: str) -> tuple[str, str | None]:
-    if colour not in COLOURS:
-        raise GoalError(f"unknown colour {colour!r}; known colours: {', '.join(COLOURS)}")
-    if shape_word not in SHAPE_WORDS:
-        raise GoalError(f"unknown object {shape_word!r}; known objects: {', '.join(SHAPE_WORDS)}")
-    return colour, SHAPE_WORDS[shape_word]
+def _normalise(text: str) -> list[str]:
+    """Lower case words; "block's" becomes "block 's", contractions are spelt out, other
+    punctuation and hyphens are spaces."""
+    s = text.lower().replace("\u2019", "'").replace("`", "'")
+    for pattern, repl in _CONTRACTIONS:
+        s = re.sub(pattern, repl, s)
+    s = re.sub(r"[^\w\s']", " ", s.replace("_", " "))
+    return [t if t == "'s" else t.strip("'") for t in s.split() if t.strip("'")]
+
+
+def _pattern_words(patterns) -> set[str]:
+    return {w for p in patterns for w in re.findall(r"[a-z]+", p)}
+
+
+VOCABULARY = frozenset(
+    set(COLOURS) | OTHER_COLOURS | set(SHAPE_WORDS) | DETERMINERS | ADJECTIVES | SELF_WORDS | NEGATIONS
+    | LINK_FILLERS | LEAD_WORDS | TAIL_WORDS | set(POSSESSIVE_SIDES) | {"and", "'s", "each", "other", "another"}
+    | _pattern_words([p for ps in RELATION_PATTERNS.values() for p in ps] + [POSSESSIVE_LINK, POSSESSIVE_TAIL])
+)
+_FILLERS = "|".join(sorted(LINK_FILLERS | {"please"}))
+# "pick up the red block and put it on ...": the object taken up again by "it".
+_RESUME = rf"(?:and (?:{'|'.join(sorted(PLACING_VERBS))}) it )?"
+_LINKS = {rel: re.compile(rf"^{_RESUME}(?:(?:{_FILLERS}) )*(?:{'|'.join(ps)})$")
+          for rel, ps in RELATION_PATTERNS.items()}
+_POSSESSIVE_LINK = re.compile(rf"^{_RESUME}(?:(?:{_FILLERS}) )*{POSSESSIVE_LINK}$")
+_POSSESSIVE = re.compile(rf"^'s ({'|'.join(POSSESSIVE_SIDES)}){POSSESSIVE_TAIL}(?= |$)")
+_EACH_OTHER = re.compile(rf"^(.*?) ?{EACH_OTHER}(?= |$)")
+
+
+@dataclass
+class _Mention:
+    """An object phrase: its colour words, its noun as written, where it is in the tokens."""
+
+    colours: list[str]
+    noun: str | None
+    start: int
+    end: int
+    self_ref: bool = False  # "itself"
+
+    @property
+    def phrase(self) -> str:
+        """"red block", "red and green blocks", "red" (as written, for messages)."""
+        colours = " and ".join(filter(None, [", ".join(self.colours[:-1]), self.colours[-1]])) if self.colours else ""
+        return f"{colours} {self.noun or ''}".strip()
+
+
+class _Refusal(Exception):
+    def __init__(self, reason: str, what: str, hint: str = "", fix: list[str] | None = None):
+        super().__init__(what)
+        self.reason, self.what, self.hint, self.fix = reason, what, hint, fix
+
+
+def _tok(tokens: list[str], i: int) -> str | None:
+    return tokens[i] if 0 <= i < len(tokens) else None
+
+
+def _is_colour(tokens: list[str], i: int) -> bool:
+    """A colour word, known or not; an unknown word right before an object noun counts too."""
+    w, nxt = _tok(tokens, i), _tok(tokens, i + 1)
+    if w is None:
+        return False
+    if w in COLOURS or w in OTHER_COLOURS:
+        return True
+    return w not in VOCABULARY and nxt in SHAPE_WORDS and nxt not in ("one", "ones")
+
+
+def _colour_list(tokens: list[str], j: int) -> tuple[list[str], int]:
+    """Colours from ``j``: "red", "red and blue", "red green and the blue"."""
+    colours = [tokens[j]]
+    j += 1
+    while True:
+        k = j
+        if _tok(tokens, k) == "and":
+            k += 1 + (_tok(tokens, k + 1) in DETERMINERS)
+        if not _is_colour(tokens, k):
+            return colours, j
+        colours.append(tokens[k])
+        j = k + 1
+
+
+def _mention_at(tokens: list[str], i: int) -> _Mention | None:
+    """The object phrase starting at token ``i``, if one does."""
+    j = i + (_tok(tokens, i) in DETERMINERS)
+    while _tok(tokens, j) in ADJECTIVES:
+        j += 1
+    w = _tok(tokens, j)
+    if w in SELF_WORDS:
+        return _Mention([], None, i, j + 1, self_ref=True)
+    if not _is_colour(tokens, j):
+        has_det = j > i
+        if w is not None and ((w in SHAPE_WORDS and (has_det or w not in ("one", "ones")))
+                              or (has_det and w not in VOCABULARY)):
+            return _Mention([], w, i, j + 1)  # "the block" (no colour), "the table" (unknown)
+        return None
+    colours, j = _colour_list(tokens, j)
+    noun = _tok(tokens, j)
+    if noun is None or (noun in VOCABULARY and noun not in SHAPE_WORDS):
+        return _Mention(colours, None, i, j)  # a bare colour: "stack red on blue"
+    return _Mention(colours, noun, i, j + 1)
+
+
+def _chunk(tokens: list[str]) -> list[_Mention]:
+    mentions, i = [], 0
+    while i < len(tokens):
+        m = _mention_at(tokens, i)
+        if m is None:
+            i += 1
+        else:
+            mentions.append(m)
+            i = m.end
+    return mentions
+
+
+def _closest(word: str, known) -> str | None:
+    match = difflib.get_close_matches(word, list(known), n=1, cutoff=0.6)
+    return match[0] if match else None
+
+
+def _replaced(tokens: list[str], swaps: dict[str, str | None]) -> list[str] | None:
+    """The tokens with words swapped (a fix to try), None if some word has no replacement."""
+    if any(v is None for v in swaps.values()):
+        return None
+    return [swaps.get(t, t) for t in tokens]
+
+
+def _check_objects(tokens: list[str], mentions: list[_Mention]) -> str:
+    """The shape the objects share; _Refusal for anything wrong with the objects themselves."""
+    colours = [c for m in mentions for c in m.colours]
+    unknown = [c for c in colours if c not in COLOURS]
+    if unknown:
+        raise _Refusal("unknown colour", f"unknown colour {unknown[0]!r}", f"known colours: {', '.join(COLOURS)}",
+                       _replaced(tokens, {c: _closest(c, COLOURS) for c in unknown}))
+    nouns = [m.noun for m in mentions if m.noun is not None and m.noun not in SHAPE_WORDS]
+    if nouns:
+        raise _Refusal("unknown object", f"unknown object {nouns[0]!r}",
+                       f"known objects: {', '.join(SHAPES)} (also cube, object, one)",
+                       _replaced(tokens, {n: _closest(n, ("block", "cube", "puck")) or "object" for n in nouns}))
+    colourless = next((m for m in mentions if not m.colours and not m.self_ref), None)
+    if colourless is not None:
+        raise _Refusal("no colour", f"{'the ' + colourless.noun!r} names no colour",
+                       f"name each object by its colour: {', '.join(COLOURS)}")
+    shapes = {SHAPE_WORDS[m.noun] for m in mentions if m.noun} - {None}
+    if len(shapes) > 1:
+        first = next(SHAPE_WORDS[m.noun] for m in mentions if m.noun and SHAPE_WORDS[m.noun])
+        swaps = {w: "object" for w, s in SHAPE_WORDS.items() if s not in (None, first)}
+        raise _Refusal("mixed objects", f"a goal relates objects of one kind, got {' and '.join(sorted(shapes))}",
+                       fix=_replaced(tokens, swaps))
+    twice = next((c for i, c in enumerate(colours) if c in colours[:i]), None)
+    if twice or any(m.self_ref for m in mentions):
+        got = f"the {twice} one twice" if twice else f"the {mentions[0].phrase} and itself"
+        raise _Refusal("same object", f"a goal must name different objects, got {got}")
+    if len(colours) < 2:
+        what = f"only one object ({mentions[0].phrase})" if colours else "no coloured block or puck"
+        raise _Refusal("one object" if colours else "no object", what,
+                       "a goal relates two objects (three for in between)")
+    return shapes.pop() if shapes else "block"
+
+
+def _link_relation(link: str) -> str | None:
+    """The relation a link between two objects names ("should be right next to": close_to)."""
+    return next((rel for rel, pattern in _LINKS.items() if pattern.match(link)), None)
+
+
+def _possessive(link: str, tail: str) -> tuple[str | None, int]:
+    """"to the red block's right": the relation and how many tail words it takes."""
+    m = _POSSESSIVE.match(tail)
+    if m is None or not _POSSESSIVE_LINK.match(link):
+        return None, 0
+    return POSSESSIVE_SIDES[m.group(1)], len(m.group(0).split())
+
+
+def _no_relation(tokens: list[str], mentions: list[_Mention], link: str | None) -> _Refusal:
+    """The refusal for two objects without a relation; the fix respells a misspelt one."""
+    known = ", ".join(RELATION_WORDS[r][0] for r in RELATIONS)
+    names = " and ".join(f"the {m.phrase}" for m in mentions[:2])
+    what = f"no relation between {names}" + (f" ({link!r} is not one)" if link else "")
+    fix = None
+    words = (link or "").split()
+    wordings = [w for ws in RELATION_WORDS.values() for w in ws]
+    for n in range(1, min(4, len(words)) + 1):
+        match = difflib.get_close_matches(" ".join(words[-n:]), wordings, n=1, cutoff=0.8)
+        if match and len(mentions) > 1:
+            a, b = mentions[0], mentions[1]
+            fix = tokens[:a.end] + words[:-n] + match[0].split() + tokens[b.start:]
+            break
+    return _Refusal("no relation", what, f"known relations: {known}", fix)
+
+
+def _relate(tokens: list[str], mentions: list[_Mention]) -> tuple[str, list[str], int]:
+    """The relation, the colours in order, and where the words after the goal start."""
+    colours = [c for m in mentions for c in m.colours]
+    tail_start = mentions[-1].end
+    tail = " ".join(tokens[tail_start:])
+    links = [" ".join(tokens[a.end:b.start]) for a, b in zip(mentions, mentions[1:])]
+    if all(link == "and" for link in links):  # "the blue and yellow pucks next to each other"
+        m = _EACH_OTHER.match(tail)
+        if m and len(colours) == 2 and _link_relation(m.group(1)) == "close_to":
+            return "close_to", colours, tail_start + len(m.group(0).split())
+        if len(mentions) == 1:
+            raise _no_relation(tokens, mentions, None)
+    # "on the yellow block's left": the side after the possessive is the relation, not "on".
+    relation, used = _possessive(links[0], tail) if len(mentions) == 2 else (None, 0)
+    tail_start += used
+    relation = relation or _link_relation(links[0])
+    if relation is None:
+        raise _no_relation(tokens, mentions, links[0])
+    sizes = [len(m.colours) for m in mentions]
+    if relation == "in_between":
+        fits = sizes[0] == 1 and len(colours) == 3 and all(link == "and" for link in links[1:])
+    else:
+        fits = sizes == [1, 1]
+    if not fits:
+        arity = RELATIONS[relation].arity
+        raise _Refusal("object count", f"{RELATION_WORDS[relation][0]!r} relates {arity} objects, "
+                                       f"the goal names {len(colours)} ({', '.join(colours)})")
+    return relation, colours, tail_start
+
+
+def _check_words(tokens: list[str], lead_end: int, tail_start: int) -> None:
+    """Words before the first object and after the goal must be ones zsrm knows to mean nothing."""
+    lead, tail = tokens[:lead_end], tokens[tail_start:]
+    unknown = [w for w in lead if w not in LEAD_WORDS] + [w for w in tail if w not in TAIL_WORDS]
+    if unknown:
+        keep_lead = all(w in LEAD_WORDS for w in lead)
+        keep_tail = all(w in TAIL_WORDS for w in tail)
+        fix = (lead if keep_lead else []) + tokens[lead_end:tail_start] + (tail if keep_tail else [])
+        raise _Refusal("extra words", f"words zsrm cannot read: {' '.join(unknown)!r}", fix=fix)
+
+
+def _read(tokens: list[str]) -> Task:
+    negation = next((t for t in tokens if t in NEGATIONS), None)
+    if negation:
+        raise _Refusal("negation", f"the goal says {negation!r}",
+                       "write the relation that should hold, not one that should not")
+    mentions = _chunk(tokens)
+    shape = _check_objects(tokens, mentions)
+    relation, colours, tail_start = _relate(tokens, mentions)
+    _check_words(tokens, mentions[0].start, tail_start)
+    return Task(relation, tuple(colours), shape)
+
+
+def _suggest(tokens: list[str] | None) -> str | None:
+    """The canonical text of the goal a fixed sentence reads as, if it reads as one."""
+    if not tokens:
+        return None
+    try:
+        return _read(tokens).text
+    except (_Refusal, GoalError):
+        return None
 
 
 def parse_goal(text: str) -> Task:
-    """Parse a goal sentence such as "a yellow block on top of a red block" into a Task."""
+    """Read a goal sentence ("put the red block onto the yellow one") as a Task.
+
+    GoalError (with ``reason`` and ``suggestion``) for anything the grammar does not read; its
+    message is one line: what is wrong, what is known, and the nearest goal that reads, if any.
+    """
     if not isinstance(text, str) or not text.strip():
-        raise GoalError("empty goal: write a sentence such as 'a yellow block on top of a red block'")
-    s = re.sub(r"[^\w\s]", " ", text.lower())
-    s = re.sub(r"\s+", " ", s).strip()
-    s = re.sub(r"^(?:an? )?(?:image|photo|picture) of ", "", s)
-    for relation, wordings in sorted(RELATION_WORDS.items(), key=lambda kv: -max(map(len, kv[1]))):
-        for words in wordings:
-            if RELATIONS[relation].arity == 3:
-                pattern = rf"^{_OBJECT} {words} {_OBJECT} and {_OBJECT}$"
-            else:
-                pattern = rf"^{_OBJECT} {words} {_OBJECT}$"
-            m = re.match(pattern, s)
-            if m:
-                return _task_from_match(relation, m.groups(), text)
-    _explain_failure(s, text)
-
-
-def _task_from_match(relation: str, groups: tuple[str, ...], text: str) -> Task:
-    parsed = [_parse_object(groups[i], groups[i + 1]) for i in range(0, len(groups), 2)]
-    shapes = {shape for _, shape in parsed if shape is not None}
-    if len(shapes) > 1:
-        raise GoalError(f"a goal relates objects of one kind, got {' and '.join(sorted(shapes))} in {text!r}")
-    return Task(relation, tuple(c for c, _ in parsed), shapes.pop() if shapes else "block")
-
-
-def _explain_failure(s: str, text: str):
-    words = set(s.split())
-    unknown_colours = [w for w in words if w in _COMMON_COLOURS and w not in COLOURS]
-    if unknown_colours:
-        raise GoalError(f"unknown colour {unknown_colours[0]!r} in {text!r}; known colours: {', '.join(COLOURS)}")
-    known = "; ".join(f"{r}: '{w[0]}'" for r, w in RELATION_WORDS.items())
-    raise GoalError(
-        f"cannot read the goal {text!r}. Write '<a colour shape> <relation> <a colour shape>', "
-        f"e.g. 'a yellow block on top of a red block'. Known relations: {known}. "
-        f"Known colours: {', '.join(COLOURS)}. Known objects: {', '.join(SHAPES)}."
-    )
-
-
-_COMMON_COLOURS = {"purple", "orange", "pink", "black", "white", "brown", "grey", "gray", "cyan", "magenta"}
+        raise GoalError("empty goal: write a sentence such as 'a yellow block on top of a red block'", "empty")
+    shown = " ".join(text.split())
+    try:
+        return _read(_normalise(text))
+    except _Refusal as r:
+        suggestion = _suggest(r.fix)
+        message = f"cannot read {shown!r}: {r.what}" + (f"; {r.hint}" if r.hint else "")
+        message += f"; did you mean {suggestion!r}?" if suggestion else ""
+        raise GoalError(message, r.reason, suggestion) from None
