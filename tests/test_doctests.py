@@ -4,8 +4,9 @@ import importlib
 
 import pytest
 
-MODULES = ["zsrm.tasks.catalogue", "zsrm.envs.rollout", "zsrm.fullmodel", "zsrm.evaluation.metrics",
-           "zsrm.evaluation.curves", "zsrm.cli.options", "zsrm.testing.colour_vlm", "zsrm.testing.synthetic"]
+MODULES = ["zsrm.tasks.catalogue", "zsrm.tasks.language", "zsrm.envs.rollout", "zsrm.fullmodel", "zsrm.evaluation.metrics",
+           "zsrm.evaluation.curves", "zsrm.evaluation.goal_parsing", "zsrm.cli.options", "zsrm.testing.colour_vlm",
+           "zsrm.testing.synthetic"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -14,9 +14,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from zsrm.cli.options import add_command, from_namespace  # noqa: E402
-from zsrm.pipeline import build, demo, learn, measure  # noqa: E402
+from zsrm.pipeline import build, demo, goals, learn, measure  # noqa: E402
 
 COMMANDS = {
+    "parse-goal": goals.ParseGoal,
     "render": measure.Render,
     "scripted-eval": measure.ScriptedEval,
     "demo": demo.Demo,
@@ -30,6 +31,7 @@ COMMANDS = {
     "reward-data": build.RewardData,
     "finetune": build.Finetune,
     "eval-reward": measure.EvalReward,
+    "eval-goals": goals.EvalGoals,
     "train": learn.Train,
     "rollout": learn.Rollout,
     "sweep": learn.Sweep,

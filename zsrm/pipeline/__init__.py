@@ -8,6 +8,7 @@ the command line into one of them (:mod:`zsrm.cli`).
   label, reward-data, finetune);
 * :mod:`zsrm.pipeline.measure`: stages that measure (render, scripted-eval, eval-vlm,
   reward, reward-curve, eval-grounding, eval-reward);
+* :mod:`zsrm.pipeline.goals`: goal sentences (parse-goal, eval-goals);
 * :mod:`zsrm.pipeline.demo`: the offline main job's report (``zsrm demo``).
 """
 from __future__ import annotations

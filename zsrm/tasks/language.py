@@ -201,10 +201,12 @@ def _mention_at(tokens: list[str], i: int) -> _Mention | None:
         return _Mention([], None, i, j + 1, self_ref=True)
     if not _is_colour(tokens, j):
         has_det = j > i
-        if w is not None and ((w in SHAPE_WORDS and (has_det or w not in ("one", "ones")))
-                              or (has_det and w not in VOCABULARY)):
-            return _Mention([], w, i, j + 1)  # "the block" (no colour), "the table" (unknown)
-        return None
+        if w in SHAPE_WORDS and (has_det or w not in ("one", "ones")):
+            return _Mention([], w, i, j + 1)  # "the block": no colour
+        end = j
+        while has_det and _tok(tokens, end) is not None and _tok(tokens, end) not in VOCABULARY:
+            end += 1
+        return _Mention([], " ".join(tokens[j:end]), i, end) if end > j else None  # "the table": unknown
     colours, j = _colour_list(tokens, j)
     noun = _tok(tokens, j)
     if noun is None or (noun in VOCABULARY and noun not in SHAPE_WORDS):

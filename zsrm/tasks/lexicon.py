@@ -77,7 +77,7 @@ LINK_FILLERS = frozenset("""
     gets get got go goes going end ends ending up down over stay stays sit sits sitting sat rest rests
     resting lie lies lying stand stands standing placed put set positioned located stacked moved pushed
     slid dropped kept lands land right directly just immediately exactly precisely squarely neatly
-    carefully gently somewhere slightly a little bit
+    carefully gently quickly slowly firmly also somewhere slightly a little bit
 """.split())
 
 # Verbs of placing an object: they start a goal ("put the red block ...") and take up an
