@@ -18,6 +18,7 @@ test: setup
 
 # Rebuild every figure under results/ (slow: minutes to hours on 2 CPU cores).
 results: setup
+	$(VENV)/bin/zsrm eval-goals --out results/goals.json
 	$(VENV)/bin/zsrm scripted-eval --episodes 20 --out results/scripted_success.json
 	$(PY) benchmarks/env_speed.py --out results/env_speed.json
 	$(VENV)/bin/zsrm eval-vlm --vlm scene --images 500 --seed 0 --out results/vlm_presence.json
