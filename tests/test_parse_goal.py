@@ -74,6 +74,7 @@ def test_semantics_of_what_people_write(text, relation, objects):
      "a red block on top of a green block"),
     ("put the red block on the table", "unknown object", "unknown object 'table'", None),
     ("put the block on the red block", "no colour", "'the block' names no colour", None),
+    ("two blocks on the red block", "no colour", "'blocks' names no colour", None),
     ("push the blue puck next to the yellow block", "mixed objects", "objects of one kind, got block and puck",
      "a blue puck close to a yellow puck"),
     ("put the red block on the red one", "same object", "different objects, got the red one twice", None),
@@ -130,8 +131,8 @@ def test_parse_goal_command_prints_the_reading(capsys):
     assert main(["parse-goal", "the blue puck should be near the yellow one", "--json"]) == 0
     reading = json.loads(capsys.readouterr().out)
     assert reading == {"text": "the blue puck should be near the yellow one", "relation": "close_to",
-                       "objects": ["blue", "yellow"], "shape": "puck", "canonical": "a blue puck close to a yellow puck",
-                       "scene": "pushing", "camera": "tilted"}
+                       "objects": ["blue", "yellow"], "shape": "puck",
+                       "canonical": "a blue puck close to a yellow puck", "scene": "pushing", "camera": "tilted"}
 
 
 @pytest.mark.parametrize("text, message", [

@@ -29,8 +29,9 @@ import re
 from dataclasses import dataclass
 
 from zsrm.tasks.lexicon import (ADJECTIVES, COLOURS, DETERMINERS, EACH_OTHER, LEAD_WORDS, LINK_FILLERS, NEGATIONS,
-                                OTHER_COLOURS, PLACING_VERBS, POSSESSIVE_LINK, POSSESSIVE_SIDES, POSSESSIVE_TAIL, RELATION_PATTERNS,
-                                RELATION_WORDS, SELF_WORDS, SHAPE_WORDS, SHAPES, TAIL_WORDS)
+                                OTHER_COLOURS, PLACING_VERBS, POSSESSIVE_LINK, POSSESSIVE_SIDES, POSSESSIVE_TAIL,
+                                QUANTIFIERS, RELATION_PATTERNS, RELATION_WORDS, SELF_WORDS, SHAPE_WORDS, SHAPES,
+                                TAIL_WORDS)
 from zsrm.tasks.relations import RELATIONS
 
 assert set(RELATION_WORDS) == set(RELATION_PATTERNS) == set(RELATIONS)
@@ -127,7 +128,7 @@ def _pattern_words(patterns) -> set[str]:
 
 VOCABULARY = frozenset(
     set(COLOURS) | OTHER_COLOURS | set(SHAPE_WORDS) | DETERMINERS | ADJECTIVES | SELF_WORDS | NEGATIONS
-    | LINK_FILLERS | LEAD_WORDS | TAIL_WORDS | set(POSSESSIVE_SIDES) | {"and", "'s", "each", "other", "another"}
+    | LINK_FILLERS | LEAD_WORDS | TAIL_WORDS | QUANTIFIERS | set(POSSESSIVE_SIDES) | {"and", "'s", "each"}
     | _pattern_words([p for ps in RELATION_PATTERNS.values() for p in ps] + [POSSESSIVE_LINK, POSSESSIVE_TAIL])
 )
 _FILLERS = "|".join(sorted(LINK_FILLERS | {"please"}))
@@ -252,7 +253,7 @@ def _check_objects(tokens: list[str], mentions: list[_Mention]) -> str:
                        _replaced(tokens, {n: _closest(n, ("block", "cube", "puck")) or "object" for n in nouns}))
     colourless = next((m for m in mentions if not m.colours and not m.self_ref), None)
     if colourless is not None:
-        raise _Refusal("no colour", f"{'the ' + colourless.noun!r} names no colour",
+        raise _Refusal("no colour", f"{' '.join(tokens[colourless.start:colourless.end])!r} names no colour",
                        f"name each object by its colour: {', '.join(COLOURS)}")
     shapes = {SHAPE_WORDS[m.noun] for m in mentions if m.noun} - {None}
     if len(shapes) > 1:

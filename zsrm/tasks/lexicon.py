@@ -30,6 +30,8 @@ DETERMINERS = frozenset({"a", "an", "the"})
 # Words between the determiner and the colour that change nothing (all blocks are alike).
 ADJECTIVES = frozenset({"small", "little", "tiny", "big", "large"})
 SELF_WORDS = frozenset({"itself", "themselves"})
+# Counting words: "two blocks" names blocks but not which ones.
+QUANTIFIERS = frozenset({"two", "three", "four", "both", "all", "every", "some", "any", "other", "another"})
 NEGATIONS = frozenset({"not", "never", "no", "nor", "without", "nowhere", "neither"})
 
 # Relation phrases as regular expressions over the normalised sentence (lower case, single
