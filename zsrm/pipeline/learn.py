@@ -6,11 +6,14 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import platform
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
 from zsrm.rl.config import PRESETS, REWARDS, TrainConfig
+from zsrm.vlm.files import check_writable, write_json
 
 SWEEP_TASKS = ("stack", "place_right", "push_close")
 
@@ -38,6 +41,7 @@ class Train(TrainConfig):
 
         cfg = with_preset(self, self.config)
         out = Path(self.out or f"runs/rl/{cfg.goal.replace(' ', '_')}-{cfg.reward}-{cfg.seed}")
+        check_writable(out, folder=True)
         summary = train(cfg, out, fresh=self.fresh)
         print(f"{cfg.goal} with the {cfg.reward} reward, {summary['env_steps']} env steps: oracle episode reward "
               f"{summary['final_mean']:.1f} +- {summary['final_se']:.1f}, success {summary['final_success_rate']:.2f} "
@@ -60,21 +64,22 @@ class Rollout:
     def run(self) -> int:
         from zsrm.rl.evaluate import rollout
 
+        for path in (self.out, self.gif):
+            if path:
+                check_writable(path)
         result = rollout(self.policy, self.episodes, self.seed, self.spread, self.gif)
         print(f"oracle episode reward {result['mean']:.1f} +- {result['se']:.1f}, "
               f"success {result['success_rate']:.2f} over {self.episodes} episodes")
         if self.gif:
             print(f"wrote {self.gif}")
         if self.out:
-            Path(self.out).parent.mkdir(parents=True, exist_ok=True)
-            Path(self.out).write_text(json.dumps(result, indent=2) + "\n")
-            print(f"wrote {self.out}")
+            print(f"wrote {write_json(self.out, result)}")
         return 0
 
 
 @dataclass
 class Sweep:
-    """Train tasks x rewards x seeds on Ray Tune (resumable), then gather the summary."""
+    """Train tasks x rewards x seeds on Ray Tune (resumable), then gather the summary and plot."""
 
     tasks: tuple[str, ...] = SWEEP_TASKS  # catalogue tasks or goal sentences
     rewards: tuple[str, ...] = ("oracle", "zsrm", "random")  # rewards, of: oracle, zsrm, random
@@ -83,22 +88,37 @@ class Sweep:
     steps: int = 300_000  # env steps per trial
     num_cpus: int = 2  # CPUs of the local Ray (one trial per CPU)
     address: str | None = None  # a Ray cluster to join instead (auto, or ray://HOST:PORT)
-    out: str = "results/rl/learning.json"  # the gathered summary (JSON)
+    out: str = "results/rl/learning.json"  # the gathered summary; the plot beside it (.png), trials in trials/
 
     def run(self) -> int:
-        from zsrm.rl.sweep import gather, sweep
+        from zsrm.evaluation.learning_curves import plot_learning_curves
+        from zsrm.rl.sweep import gather, keep_trial_summaries, sweep, trial_grid
 
         unknown = set(self.rewards) - set(REWARDS)
         if unknown:
             raise ValueError(f"unknown rewards {', '.join(sorted(unknown))}; choose from {', '.join(REWARDS)}")
-        ran = sweep(self.root, self.tasks, self.rewards, self.seeds, {"steps": self.steps},
-                    num_cpus=self.num_cpus, address=self.address)
+        check_writable(self.root, folder=True)
+        check_writable(self.out)
+        overrides = {"steps": self.steps}
+        ran = sweep(self.root, self.tasks, self.rewards, self.seeds, overrides, num_cpus=self.num_cpus,
+                    address=self.address)
         print(f"ran {len(ran)} trial(s); the others were finished already")
-        summary = gather(self.root)
-        Path(self.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(self.out).write_text(json.dumps(summary, indent=2) + "\n")
+        out = Path(self.out)
+        names = [t["name"] for t in trial_grid(self.tasks, self.rewards, self.seeds, overrides)]
+        kept = keep_trial_summaries(self.root, out.parent / "trials", names)
+        summary = gather(kept)
+        out.write_text(json.dumps({**summary, "meta": self.meta(len(kept), len(names))}, indent=2) + "\n")
+        plot_learning_curves(summary, out.with_suffix(".png"))
         for task, rewards in summary.items():
             print(task + ": " + ", ".join(f"{r} {v['final_mean']:.1f}+-{v['final_se']:.1f} ({v['seeds']} seeds)"
                                           for r, v in rewards.items()))
-        print(f"wrote {self.out}")
+        print(f"wrote {out} and {out.with_suffix('.png')}")
         return 0
+
+    def meta(self, finished: int, planned: int) -> dict:
+        return {"trials_finished": finished, "trials_planned": planned,
+                "metric": "oracle episode reward: control steps of 100 in the goal relation, mean over 30 "
+                          "evaluation episodes per seed, then mean and s.e. over seeds",
+                "command": f"zsrm sweep --tasks {' '.join(self.tasks)} --rewards {' '.join(self.rewards)} "
+                           f"--seeds {' '.join(map(str, self.seeds))} --steps {self.steps} --out {self.out}",
+                "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU"}

@@ -8,8 +8,8 @@ Each trial is one :func:`~zsrm.rl.ppo.train` run in its own folder
 * trials run in parallel on a local Ray (``ray.init(num_cpus=N)``) or spread over a cluster
   (``address="auto"`` or ``ray://HOST:PORT``); on a cluster ROOT must be shared storage.
 
-:func:`gather` then reads every run folder into one summary: per task and reward the mean
-and standard error over seeds of each run's final oracle episode reward, and the curves.
+:func:`gather` then reads the runs' summaries into one: per task and reward the mean and
+standard error over seeds of each run's final oracle episode reward, and the curves.
 
 >>> from zsrm.rl.sweep import trial_grid
 >>> [t["name"] for t in trial_grid(["stack"], ["oracle", "zsrm"], [0])]
@@ -93,26 +93,42 @@ def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | None = None
     return [t["name"] for t in todo]
 
 
-def gather(root: str | Path) -> dict:
-    """``<task>.<reward>.{final_mean, final_se, seeds, steps, curve}`` from every finished run
-    under ``root``; the curve is the mean and s.e. over seeds at each evaluation step."""
+def gather(summaries) -> dict:
+    """``<task>.<reward>.{final_mean, final_se, seeds, steps, curve}`` from run summaries (paths
+    of ``summary.json`` files or their dicts); the curve is the mean and s.e. over seeds at each
+    evaluation step that every seed reached."""
     runs: dict[tuple[str, str], list[dict]] = {}
-    for path in sorted(Path(root).glob("*/summary.json")):
-        summary = json.loads(path.read_text())
+    for summary in summaries:
+        if not isinstance(summary, dict):
+            summary = json.loads(Path(summary).read_text())
         cfg = summary["config"]
         runs.setdefault((cfg["goal"], cfg["reward"]), []).append(summary)
     out: dict = {}
-    for (task, reward), summaries in sorted(runs.items()):
-        finals = [s["final_mean"] for s in summaries]
+    for (task, reward), group in sorted(runs.items()):
+        finals = [s["final_mean"] for s in group]
         mean, se = mean_se(finals)
         out.setdefault(task, {})[reward] = {
-            "final_mean": mean, "final_se": se, "seeds": len(summaries),
-            "steps": max(s["env_steps"] for s in summaries),
+            "final_mean": mean, "final_se": se, "seeds": len(group),
+            "steps": max(s["env_steps"] for s in group),
             "final_per_seed": finals,
-            "final_success_rate": float(np.mean([s["final_success_rate"] for s in summaries])),
-            "curve": mean_curve([s["curve"] for s in summaries]),
+            "final_success_rate": float(np.mean([s["final_success_rate"] for s in group])),
+            "curve": mean_curve([s["curve"] for s in group]),
         }
     return out
+
+
+def keep_trial_summaries(root: str | Path, dest: str | Path, names) -> list[Path]:
+    """Copy the named finished trials' ``summary.json`` (curve included, a few kB) to
+    ``dest/<name>.json``, the small files a results folder keeps under version control."""
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    kept = []
+    for name in names:
+        src = Path(root) / name / "summary.json"
+        if src.is_file():
+            (dest / f"{name}.json").write_text(src.read_text())
+            kept.append(dest / f"{name}.json")
+    return kept
 
 
 def mean_curve(curves: list[list[dict]]) -> list[dict]:

@@ -1,0 +1,51 @@
+"""zsrm sweep: trials on a local Ray, killed and resumed, finished trials skipped, gathered."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from zsrm.rl.sweep import gather, is_finished, keep_trial_summaries, trial_grid
+
+TINY = dict(steps=512, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, keypoints=4,
+            eval_every=128, checkpoint_every=128)
+
+
+def test_trial_grid_names_and_configs():
+    grid = trial_grid(["stack", "push_close"], ["oracle"], [0, 1], {"steps": 1000})
+    assert [t["name"] for t in grid] == ["stack-oracle-0", "stack-oracle-1", "push_close-oracle-0",
+                                         "push_close-oracle-1"]
+    assert all(t["config"]["steps"] == 1000 for t in grid)
+
+
+def test_two_trial_sweep_is_killed_and_resumed(tmp_path):
+    code = ("import json, sys; from zsrm.rl.sweep import sweep; "
+            "sweep(sys.argv[1], ['push_close'], ['oracle'], [0, 1], json.loads(sys.argv[2]), num_cpus=2)")
+    args = [sys.executable, "-c", code, str(tmp_path), json.dumps(TINY)]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen(args, env=env, start_new_session=True)
+    states = [tmp_path / f"push_close-oracle-{s}" / "checkpoint" / "state.json" for s in (0, 1)]
+    deadline = time.time() + 600
+    while not any(p.is_file() for p in states) and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.5)
+    os.killpg(proc.pid, signal.SIGKILL)  # the driver, Ray and its workers
+    proc.wait()
+    assert any(p.is_file() for p in states), "no trial wrote a checkpoint before the kill"
+    assert not all((tmp_path / f"push_close-oracle-{s}" / "summary.json").is_file() for s in (0, 1))
+
+    subprocess.run(args, env=env, check=True, timeout=900)  # resume
+    names = [t["name"] for t in trial_grid(["push_close"], ["oracle"], [0, 1], TINY)]
+    for t in trial_grid(["push_close"], ["oracle"], [0, 1], TINY):
+        assert is_finished(tmp_path / t["name"], t["config"])
+        assert json.loads((tmp_path / t["name"] / "summary.json").read_text())["env_steps"] == 512
+
+    mtimes = [(tmp_path / n / "summary.json").stat().st_mtime_ns for n in names]
+    subprocess.run(args, env=env, check=True, timeout=300)  # all finished: nothing runs again
+    assert mtimes == [(tmp_path / n / "summary.json").stat().st_mtime_ns for n in names]
+
+    kept = keep_trial_summaries(tmp_path, tmp_path / "kept", names)
+    summary = gather(kept)
+    result = summary["push_close"]["oracle"]
+    assert result["seeds"] == 2 and result["steps"] == 512
+    assert [row["env_steps"] for row in result["curve"]] == [128, 256, 384, 512]
