@@ -52,8 +52,9 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return from_namespace(args.options_class, args).run() or 0
-    except (GoalError, ValueError, FileNotFoundError) as err:
-        # Bad input or a missing file: one clear line, no traceback (ZSRM_DEBUG=1 shows it).
+    except (GoalError, ValueError, OSError) as err:
+        # Bad input, a bad or missing file, a path that cannot be written (zsrm.vlm.files.ZsrmFileError is a
+        # ValueError): one clear line, no traceback (ZSRM_DEBUG=1 shows it).
         if os.environ.get("ZSRM_DEBUG"):
             raise
         print(f"zsrm {args.command}: error: {err}", file=sys.stderr)

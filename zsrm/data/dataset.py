@@ -6,12 +6,12 @@
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from zsrm.data.shards import load_npz, read_manifest
+from zsrm.data.shards import MANIFEST, load_npz, read_manifest
+from zsrm.vlm.files import ZsrmFileError, read_json
 
 LABELS = "labels"  # the default labels folder inside a dataset folder
 ORACLE = "oracle"  # inside the labels folder: true-coordinate captions, for evaluation only
@@ -26,10 +26,14 @@ class ExplorationData:
         if self.manifest.get("kind") != "exploration":
             raise ValueError(f"{self.folder} holds a {self.manifest.get('kind')} folder, not collected data")
         self.config = self.manifest["config"]
-        self.colours: tuple[str, ...] = tuple(self.manifest["colours"])
-        self.scenes: tuple[str, ...] = tuple(self.config["scenes"])
-        self.cameras: tuple[str, ...] = tuple(self.config["cameras"])
-        self.block_width_px: dict[str, dict[str, float]] = self.manifest["block_width_px"]
+        try:
+            self.colours: tuple[str, ...] = tuple(self.manifest["colours"])
+            self.scenes: tuple[str, ...] = tuple(self.config["scenes"])
+            self.cameras: tuple[str, ...] = tuple(self.config["cameras"])
+            self.block_width_px: dict[str, dict[str, float]] = dict(self.manifest["block_width_px"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise ZsrmFileError(f"{self.folder / MANIFEST} is damaged: {type(err).__name__} {err}; "
+                                "not a folder written by zsrm collect") from None
         # scene -> camera -> pixel-to-table map of the tilted camera (absent in older folders)
         self.table_homography: dict[str, dict[str, list]] = self.manifest.get("table_homography", {})
 
@@ -73,8 +77,9 @@ class ExplorationData:
         for name in self.shards:
             if name not in manifest["shards"]:
                 raise ValueError(f"{folder} has not labelled {name} yet: run zsrm label")
-            if oracle is None:
-                out += json.loads((folder / f"{name}.json").read_text())["captions"]
-            else:
-                out += json.loads((folder / ORACLE / f"{name}.json").read_text())[oracle]
+            path = folder / f"{name}.json" if oracle is None else folder / ORACLE / f"{name}.json"
+            captions = read_json(path, "a labels shard").get(oracle or "captions")
+            if not isinstance(captions, list):
+                raise ZsrmFileError(f"{path} is damaged: no {oracle or 'captions'!r} list in it")
+            out += captions
         return out

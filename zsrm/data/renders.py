@@ -9,16 +9,17 @@ training scenes once and caches them shard by shard, so a killed run keeps its s
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Iterable
 
 import numpy as np
 
+from zsrm.data.shards import load_npz, save_npz
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import CAMERAS
+from zsrm.vlm.files import check_writable, read_json, write_json
 
 SCENES = tuple(SCENE_SHAPES)  # a render's "shape" is its scene's index here: 0 block, 1 puck
 STREAMS = {"train": 0, "eval": 1}  # disjoint seed streams for training and held-out scenes
@@ -131,29 +132,25 @@ def load_renders(folder: str | Path, scenes: int, shard_size: int, seed: int = 0
     (``shard-0000.npz``, ...); arrays as :func:`render_presence_scenes` returns them."""
     from tqdm import tqdm
 
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = check_writable(folder, folder=True)
     manifest = folder / "manifest.json"
     spec = {"seed": seed, "shard_size": shard_size, "image_size": image_size, "stream": "train"}
-    if manifest.exists() and json.loads(manifest.read_text()) != spec:
+    if manifest.exists() and read_json(manifest, "the settings of cached renders") != spec:
         raise ValueError(f"{folder} holds renders made with other settings ({manifest.read_text().strip()}); "
                          "use another --workdir or --fresh")
-    manifest.write_text(json.dumps(spec) + "\n")
+    write_json(manifest, spec, indent=None)
     shards = []
     n_shards = math.ceil(scenes / shard_size)
     with tqdm(total=n_shards * shard_size, desc="render scenes", unit="scene", disable=not progress) as bar:
         for s in range(n_shards):
             path = folder / f"shard-{s:04d}.npz"
             if path.exists():
-                with np.load(path) as z:
-                    data = {k: z[k] for k in z.files}
+                data = load_npz(path)
                 bar.update(shard_size)
             else:  # always whole shards, so that a shard means the same scenes in every run
                 data = render_presence_scenes(range(s * shard_size, (s + 1) * shard_size), seed=seed,
                                               size=image_size, progress=bar.update)
-                tmp = path.with_suffix(".tmp.npz")
-                np.savez(tmp, **data)
-                tmp.replace(path)
+                save_npz(path, **data)
             keep = data["scene_index"] < min(scenes, (s + 1) * shard_size)
             shards.append({k: v[keep] for k, v in data.items()})
     return {k: np.concatenate([sh[k] for sh in shards]) for k in shards[0]}

@@ -18,49 +18,55 @@ an uninterrupted one.
 from __future__ import annotations
 
 import json
-import os
+import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from zsrm.vlm.files import ZsrmFileError, atomic_path, check_writable, json_type, read_json, write_json
+
 FORMAT = "zsrm-shards-1"
 MANIFEST = "manifest.json"
 
 
-def _tmp(path: Path) -> Path:
-    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
-
-
 def save_npz(path: str | Path, **arrays) -> None:
-    """np.savez_compressed, atomically (a kill leaves the old file or none, never half)."""
-    path = Path(path)
-    tmp = _tmp(path)
-    with open(tmp, "wb") as f:
+    """np.savez_compressed, atomically (a kill or a full disk leaves the old file or none, never half)."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.savez_compressed(f, **arrays)
-    os.replace(tmp, path)
 
 
 def save_json(path: str | Path, obj: Any) -> None:
     """JSON, atomically."""
-    path = Path(path)
-    tmp = _tmp(path)
-    tmp.write_text(json.dumps(obj, indent=1) + "\n")
-    os.replace(tmp, path)
+    write_json(path, obj, indent=1)
 
 
 def load_npz(path: str | Path) -> dict[str, np.ndarray]:
-    with np.load(path, allow_pickle=False) as f:
-        return {k: f[k] for k in f.files}
+    """The arrays of a shard (never unpickled); a damaged shard is one ZsrmFileError naming it."""
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            return {k: f[k] for k in f.files}
+    except FileNotFoundError:
+        raise
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as err:
+        raise ZsrmFileError(f"{path} is not a readable shard ({str(err).splitlines()[0][:200] if str(err) else err}); "
+                            "delete it and its folder's manifest entry, then rerun the stage that wrote it") from None
+
+
+MANIFEST_FIELDS = {"kind": str, "config": dict, "n_shards": int, "complete": bool, "shards": dict}
 
 
 def read_manifest(folder: str | Path) -> dict:
     path = Path(folder) / MANIFEST
     if not path.exists():
         raise FileNotFoundError(f"no {MANIFEST} in {folder}: not a zsrm dataset folder")
-    manifest = json.loads(path.read_text())
+    manifest = read_json(path, "a zsrm shard manifest")
     if manifest.get("format") != FORMAT:
-        raise ValueError(f"{path} is not a zsrm shard manifest (format {manifest.get('format')!r})")
+        raise ZsrmFileError(f"{path} is not a zsrm shard manifest (format {manifest.get('format')!r})")
+    for key, kind in MANIFEST_FIELDS.items():
+        if not isinstance(manifest.get(key), kind) or (kind is int and isinstance(manifest[key], bool)):
+            raise ZsrmFileError(f"{path} is damaged: {key!r} must be a JSON {json_type(kind())}, "
+                                f"got {manifest.get(key)!r}"[:300])
     return manifest
 
 
@@ -76,8 +82,7 @@ class ShardFolder:
     """
 
     def __init__(self, folder: str | Path, kind: str, config: dict, n_shards: int, extra: dict | None = None):
-        self.folder = Path(folder)
-        self.folder.mkdir(parents=True, exist_ok=True)
+        self.folder = check_writable(folder, folder=True)
         config = json.loads(json.dumps(config))  # tuples -> lists, as they read back
         if (self.folder / MANIFEST).exists():
             manifest = read_manifest(self.folder)

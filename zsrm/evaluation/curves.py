@@ -135,9 +135,10 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def write_csv(rows: list[dict], path: str | Path) -> Path:
+    from zsrm.vlm.files import atomic_path
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as f:
+    with atomic_path(path) as tmp, tmp.open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
         for row in rows:

@@ -13,7 +13,6 @@
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +28,7 @@ from zsrm.grounding.labeler import RelationTable, object_tuples, pixel_threshold
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import RELATIONS
+from zsrm.vlm.files import write_json, write_text
 
 MIN_SUPPORT = 20  # fewer true positives than this: the F1 is reported but flagged as noisy
 
@@ -300,7 +300,6 @@ def _shortfalls(report: dict, cfg: LabelConfig, widths: dict, table_cameras=froz
 def write_tables(report: dict, csv_prefix: str | Path) -> list[Path]:
     """The report's per-camera and per-relation numbers as two CSV files."""
     prefix = Path(csv_prefix)
-    prefix.parent.mkdir(parents=True, exist_ok=True)
     cams = prefix.with_name(prefix.name + "_cameras.csv")
     rows = ["camera,median_px_error,p90_px_error,block_width_px,median_block_widths,median_px_error_argmax,"
             "wrong_object_rate,presence_auroc"]
@@ -308,13 +307,13 @@ def write_tables(report: dict, csv_prefix: str | Path) -> list[Path]:
         rows.append(",".join(_fmt(report[k][cam]) for k in (
             "median_px_error", "p90_px_error", "block_width_px", "median_block_widths", "median_px_error_argmax",
             "wrong_object_rate", "presence_auroc")).join([cam + ",", ""]))
-    cams.write_text("\n".join(rows) + "\n")
+    write_text(cams, "\n".join(rows) + "\n")
     rels = prefix.with_name(prefix.name + "_relations.csv")
     rows = ["relation,precision,recall,f1,support,f1_vs_world,support_world"]
     for rel in report["f1"]:
         rows.append(",".join([rel] + [_fmt(report[k][rel]) for k in (
             "precision", "recall", "f1", "support", "f1_vs_world", "support_world")]))
-    rels.write_text("\n".join(rows) + "\n")
+    write_text(rels, "\n".join(rows) + "\n")
     return [cams, rels]
 
 
@@ -383,10 +382,7 @@ def _one_image(data: ExplorationData, idx: list[int], index: int | None, phrases
 
 def save_report(report: dict, out: str | Path) -> Path:
     """The report as JSON with flat dotted keys (see :func:`flatten`)."""
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(flatten(report), indent=2) + "\n")
-    return out
+    return write_json(out, flatten(report))
 
 
 def flatten(report: dict, keep: tuple[str, ...] = ("meta", "notes", "relations")) -> dict:

@@ -12,7 +12,6 @@ nor absent; they are left out of that colour's AUROC and counted in the meta.
 """
 from __future__ import annotations
 
-import json
 import math
 import platform
 from pathlib import Path
@@ -23,6 +22,7 @@ from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import CAMERAS
 from zsrm.vlm.base import VisionLanguageModel
+from zsrm.vlm.files import write_json
 from zsrm.vlm.presence import min_visible_pixels, presence_scores
 
 
@@ -102,8 +102,6 @@ def plot_presence(arrays: dict, result: dict, path: Path) -> Path:
 
 
 def write_presence_results(result: dict, arrays: dict, out: Path) -> tuple[Path, Path]:
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    out = write_json(out, result)
     png = plot_presence(arrays, result, out.with_suffix(".png"))
     return out, png

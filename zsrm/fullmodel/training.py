@@ -21,7 +21,6 @@ of (seed, step) only, so a resumed run draws the same batches as an uninterrupte
 from __future__ import annotations
 
 import csv
-import json
 import shutil
 import time
 from dataclasses import dataclass
@@ -39,6 +38,7 @@ from zsrm.fullmodel.student import StudentConfig, StudentRewardNet
 from zsrm.tasks.negatives import candidate_texts
 from zsrm.vlm.base import VisionLanguageModel
 from zsrm.vlm.factory import DEFAULT_VLM, load_vlm
+from zsrm.vlm.files import atomic_path, write_json
 from zsrm.vlm.losses import multi_positive_contrastive_loss
 from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
 from zsrm.vlm.registry import load_weights, save_weights
@@ -328,9 +328,9 @@ def _save_trained(cfg: FinetuneConfig, model, train: CaptionedImages, val: Capti
         model.meta = {**model.meta, "zsrm_finetune": summary}
     out = Path(cfg.out)
     model.save(out)
-    (out / "training.json").write_text(json.dumps(summary, indent=1) + "\n")
+    write_json(out / "training.json", summary, indent=1)
     keys = list(dict.fromkeys(k for row in log for k in row))
-    with open(Path(cfg.workdir) / "log.csv", "w", newline="") as f:
+    with atomic_path(Path(cfg.workdir) / "log.csv") as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=keys)
         writer.writeheader()
         writer.writerows(log)

@@ -17,6 +17,7 @@ from zsrm.data.dataset import LABELS
 from zsrm.fullmodel.training import FinetuneConfig
 from zsrm.grounding.annotate import LabelConfig
 from zsrm.pipeline import narrow
+from zsrm.vlm.files import check_writable
 from zsrm.vlm.pretrain import PretrainConfig
 
 
@@ -49,6 +50,8 @@ class PretrainVlm(PretrainConfig):
         for name in ("scenes", "steps", "batch_size", "shard_size", "checkpoint_every"):
             if getattr(cfg, name) < 1:
                 raise ValueError(f"--{name.replace('_', '-')} must be at least 1")
+        check_writable(cfg.out, folder=True)
+        check_writable(cfg.workdir, folder=True)
         pretrain_scene_vlm(cfg, fresh=self.fresh, progress=not self.quiet)
         print(f"wrote {cfg.out} (model.safetensors, config.json); log in {cfg.workdir}/log.csv")
         return 0
@@ -65,6 +68,7 @@ class Collect(CollectConfig):
         from zsrm.data.collect import collect
 
         cfg = narrow(self, CollectConfig)
+        check_writable(self.out, folder=True)
         data = collect(cfg, self.out, progress=not self.quiet)
         print(f"{len(data)} images x {len(cfg.cameras)} cameras in {self.out} ({len(data.shards)} shards)")
         return 0
@@ -79,10 +83,12 @@ class Label(LabelConfig):
     quiet: bool = False  # no progress bar
 
     def run(self) -> int:
+        from zsrm.data.dataset import ExplorationData
         from zsrm.grounding.annotate import label_dataset
 
         if not Path(self.data).is_dir():
             raise FileNotFoundError(f"no dataset folder {self.data}: run zsrm collect first")
+        check_writable(ExplorationData(self.data).labels_folder(self.labels), folder=True)
         folder = label_dataset(self.data, narrow(self, LabelConfig), out=self.labels, progress=not self.quiet)
         print(f"labels (Grad-CAM captions; true-coordinate captions under {folder}/oracle, for evaluation only) "
               f"in {folder}")
@@ -129,6 +135,7 @@ class RewardData:
         from zsrm.data.collect import collect
         from zsrm.grounding.annotate import label_dataset
 
+        check_writable(self.out, folder=True)
         collect(self.collect_config(), self.out, progress=not self.quiet)
         folder = label_dataset(self.out, self.label_config(), out=self.labels, progress=not self.quiet)
         print(f"labelled data in {self.out} (labels: {folder})")
@@ -149,6 +156,8 @@ class Finetune(FinetuneConfig):
         if not Path(cfg.data).is_dir():
             raise FileNotFoundError(f"no dataset folder {cfg.data}: run zsrm reward-data, or zsrm collect and "
                                     "zsrm label, first")
+        check_writable(cfg.out, folder=True)
+        check_writable(cfg.workdir, folder=True)
         finetune(cfg, fresh=self.fresh, progress=not self.quiet)
         print(f"saved the {'student' if cfg.student else 'fine-tuned VLM'} to {cfg.out} "
               f"(validation in {Path(cfg.out) / 'training.json'})")

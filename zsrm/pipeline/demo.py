@@ -8,7 +8,6 @@ beside the binarised full reward of the shipped student reward model.
 from __future__ import annotations
 
 import csv
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +17,7 @@ from zsrm.envs.rollout import camera_strip, episode_steps, make_env, random_poli
 from zsrm.envs.scripted import scripted_controller
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.tasks.catalogue import REPORT_TASKS
+from zsrm.vlm.files import atomic_path, check_writable, write_json, write_text
 from zsrm.vlm.factory import DEFAULT_VLM
 
 SCENES = {"tabletop": "stack", "pushing": "push_close", "pendulum": "pendulum"}
@@ -45,7 +45,8 @@ def write_scenes(out: Path, size: int = 128) -> Path:
         row[:, : strip.shape[1]] = strip
         rows.append(_label(row, f"{scene}: {env.unwrapped.task if scene != 'pendulum' else env.unwrapped.goal}"))
     path = out / "scenes.png"
-    Image.fromarray(np.concatenate(rows, axis=0)).save(path)
+    with atomic_path(path) as tmp:
+        Image.fromarray(np.concatenate(rows, axis=0)).save(tmp)
     return path
 
 
@@ -58,7 +59,8 @@ def write_random_gifs(out: Path, steps: int = 40, size: int = 64) -> list[Path]:
         frames = [camera_strip(env, size) for t, *_ in episode_steps(env, random_policy, seed=0, max_steps=steps) if t]
         env.close()
         path = out / f"random_episode_{scene}.gif"
-        iio.imwrite(path, np.stack(frames), duration=80, loop=0)
+        with atomic_path(path) as tmp:
+            iio.imwrite(tmp, np.stack(frames), duration=80, loop=0)
         paths.append(path)
     return paths
 
@@ -131,15 +133,15 @@ def write_reward_curves(out: Path, vlm_spec: str = DEFAULT_VLM, zsrm_spec: str =
 
 
 def run_demo(out: Path, episodes: int = 5) -> Path:
-    out.mkdir(parents=True, exist_ok=True)
+    check_writable(out, folder=True)
     curve_files, agreement = write_reward_curves(out)
     files = [write_scenes(out), *write_random_gifs(out), *curve_files]
     rows = policy_table(episodes)
-    with open(out / "policies.csv", "w", newline="") as f:
+    with atomic_path(out / "policies.csv") as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    (out / "policies.json").write_text(json.dumps(rows, indent=2) + "\n")
+    write_json(out / "policies.json", rows)
     files += [out / "policies.csv", out / "policies.json", plot_policy_table(rows, out / "policies.png")]
     lines = ["# zsrm demo report", "", "Written by `zsrm demo` (offline).", ""]
     lines += ["| task | policy | success rate | mean steps in goal |", "|---|---|---|---|"]
@@ -149,7 +151,7 @@ def run_demo(out: Path, episodes: int = 5) -> Path:
     lines += [f"| {a['goal']} | {a['frames']} | {a['oracle_frames']} | {a['zsrm_frames']} | {a['zsrm_agrees']:.2f} |"
               for a in agreement]
     lines += ["", "Files:", *[f"- `{p.name}`" for p in files]]
-    (out / "README.md").write_text("\n".join(lines) + "\n")
+    write_text(out / "README.md", "\n".join(lines) + "\n")
     print("\n".join(lines[4:4 + 2 + len(rows)]))
     print(f"\nreport written to {out.resolve()}")
     return out

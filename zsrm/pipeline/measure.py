@@ -17,14 +17,12 @@ from typing import Literal
 from zsrm.data.dataset import LABELS
 from zsrm.evaluation.curves import FIGURE5_GOAL
 from zsrm.tasks.catalogue import REPORT_TASKS
+from zsrm.vlm import files
 from zsrm.vlm.factory import DEFAULT_VLM
 
 
 def write_json(obj: dict, out: str | Path, **dump) -> Path:
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(obj, **{"indent": 2, **dump}) + "\n")
-    return out
+    return files.write_json(out, obj, **dump)
 
 
 @dataclass
@@ -41,11 +39,11 @@ class Render:
 
         from zsrm.envs.rollout import camera_strip, make_env
 
-        out = Path(self.out or f"{self.task.replace(' ', '_')}.png")
+        out = files.check_writable(self.out or f"{self.task.replace(' ', '_')}.png")
         env = make_env(self.task, image_size=self.size)
         env.reset(seed=self.seed)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(camera_strip(env, self.size)).save(out)
+        with files.atomic_path(out) as tmp:
+            Image.fromarray(camera_strip(env, self.size)).save(tmp)
         env.close()
         print(f"wrote {out}")
         return 0
@@ -62,6 +60,8 @@ class ScriptedEval:
     def run(self) -> int:
         from zsrm.evaluation.scripted_success import scripted_success
 
+        if self.out:
+            files.check_writable(self.out)
         rates = scripted_success(self.tasks, self.episodes)
         result = dict(rates)
         result["meta"] = {
@@ -98,6 +98,8 @@ class EvalVlm:
 
         if self.images < 10:
             raise ValueError("--images must be at least 10")
+        if self.out:
+            files.check_writable(self.out)
         result, arrays = presence_eval(load_vlm(self.vlm), n_images=self.images, seed=self.seed,
                                        progress=not self.quiet)
         command = ["zsrm", "eval-vlm", "--vlm", self.vlm, "--images", str(self.images), "--seed", str(self.seed)]
@@ -167,6 +169,7 @@ class RewardCurve(BaseRewardOptions):
         from zsrm.rewards.interface import check_goal
 
         goal = check_goal(self.goal)
+        files.check_writable(Path(self.out).with_suffix(".csv"))
         reward = self.base_reward(self.camera)
         traj = record_trajectory(goal, cameras=(self.camera,), steps=self.steps, seed=self.seed,
                                  image_size=self.image_size)
@@ -197,6 +200,9 @@ class EvalGrounding:
 
         if not Path(self.data).is_dir():
             raise FileNotFoundError(f"no dataset folder {self.data}: run zsrm collect and zsrm label first")
+        for path in (self.out, self.figure, self.csv and f"{self.csv}_cameras.csv"):
+            if path:
+                files.check_writable(path)
         report = evaluate_grounding(self.data, labels=self.labels)
         report["meta"]["command"] = "zsrm eval-grounding " + " ".join(
             [self.data, "--labels", str(self.labels), "--out", str(self.out)]
@@ -249,6 +255,9 @@ class EvalReward:
         from zsrm.evaluation.reward_quality import evaluate_rewards, rollout_frames
         from zsrm.rewards.base import BaseReward
 
+        files.check_writable(self.out)
+        if self.curves:
+            files.check_writable(self.curves, folder=True)
         names, models, base_vlm = self._models()
         frames = {t: rollout_frames(t, self.scripted_episodes, self.random_episodes, self.seed, self.every,
                                     progress=not self.quiet) for t in self.tasks}

@@ -31,6 +31,7 @@ from zsrm.rl.evaluate import evaluate, random_actions
 from zsrm.rl.features import VecImageFeatures
 from zsrm.rl.policy import PolicyBundle, load_checkpoint, policy_kwargs, save_checkpoint
 from zsrm.vlm import load_vlm
+from zsrm.vlm.files import atomic_path, write_json
 
 EVAL_FIELDS = ("env_steps", "mean", "se", "success_rate", "train_reward", "wall_s")
 FINAL_EPISODES = 30
@@ -97,12 +98,10 @@ def policy_act(model: PPO, deterministic: bool):
 
 
 def write_eval_csv(path: Path, rows: list[dict]) -> None:
-    tmp = path.with_suffix(".csv.tmp")
-    with tmp.open("w", newline="") as f:
+    with atomic_path(path) as tmp, tmp.open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=EVAL_FIELDS)
         writer.writeheader()
         writer.writerows(rows)
-    tmp.replace(path)
 
 
 def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool = True, on_eval=None) -> dict:
@@ -119,7 +118,7 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
         summary = json.loads((out / "summary.json").read_text())
         if summary.get("config", {}) == cfg.to_dict():
             return summary  # finished run: nothing to do
-    (out / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
+    write_json(out / "config.json", cfg.to_dict())
     if cfg.reward == "random":
         return finish_random(cfg, out)
 
@@ -166,7 +165,5 @@ def write_summary(cfg: TrainConfig, out: Path, final: dict, rows: list[dict], en
     summary = {"config": cfg.to_dict(), "env_steps": env_steps, "final_mean": final["mean"], "final_se": final["se"],
                "final_success_rate": final["success_rate"], "final_episodes": len(final["episode_rewards"]),
                "final_episode_rewards": final["episode_rewards"], "curve": rows}
-    tmp = out / "summary.json.tmp"
-    tmp.write_text(json.dumps(summary, indent=2) + "\n")
-    tmp.replace(out / "summary.json")
+    write_json(out / "summary.json", summary)
     return summary

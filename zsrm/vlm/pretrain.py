@@ -25,6 +25,7 @@ from torch import nn
 
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.catalogue import SCENE_SHAPES
+from zsrm.vlm.files import atomic_path
 from zsrm.vlm.losses import multi_positive_contrastive_loss
 from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
 from zsrm.vlm.presence import all_presence_captions, presence_caption, visible_colours
@@ -161,7 +162,7 @@ def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True) -> SceneVLM
         "train_seconds": log[-1]["seconds"] if log else None,
     }
     model.save(cfg.out)
-    with open(work / "log.csv", "w", newline="") as f:
+    with atomic_path(work / "log.csv") as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=["step", "loss", "seconds"])
         writer.writeheader()
         writer.writerows(log)
