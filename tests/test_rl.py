@@ -16,7 +16,7 @@ from zsrm.rl.policy import PolicyBundle
 TINY = dict(n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, keypoints=4)
 
 
-@pytest.mark.parametrize("reward", ["oracle", "zsrm"])
+@pytest.mark.parametrize("reward", ["oracle", "zsrm", "base", "vice", "curiosity"])
 def test_a_few_hundred_ppo_steps_with_each_reward(tmp_path, reward):
     cfg = TrainConfig(goal="push_close", reward=reward, steps=256, eval_every=128, checkpoint_every=128, **TINY)
     summary = train(cfg, tmp_path, progress=False)

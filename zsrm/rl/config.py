@@ -8,15 +8,16 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Literal
 
-REWARDS = ("oracle", "zsrm", "random")
+REWARDS = ("oracle", "zsrm", "base", "vice", "curiosity", "random")
 
 
 @dataclass
 class TrainConfig:
     goal: str = "stack"
     """goal sentence or catalogue task name (stack, place_right, push_close, ...)"""
-    reward: Literal["oracle", "zsrm", "random"] = "oracle"
-    """reward the policy learns from: oracle (privileged), zsrm (the full reward model), random (no learning)"""
+    reward: Literal["oracle", "zsrm", "base", "vice", "curiosity", "random"] = "oracle"
+    """reward the policy learns from: oracle (privileged), zsrm (the full reward model), base (the VLM's
+    image-goal cosine), vice (privileged goal classifier), curiosity (ICM, no goal), random (no learning)"""
     seed: int = 0
     """seed of the policy, the training envs and the evaluation envs"""
     steps: int = 300_000

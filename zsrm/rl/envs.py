@@ -37,9 +37,11 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen") -> 
     return venv
 
 
-def make_reward(cfg: TrainConfig):
-    """The RewardModel that ``cfg.reward`` names (None for the random policy)."""
-    from zsrm.rewards import OracleReward, ZSRMReward
+def make_reward(cfg: TrainConfig, folder=None):
+    """The RewardModel that ``cfg.reward`` names: oracle, zsrm, base (the scene VLM's cosine of
+    the frame and the goal, paper 2.1) or vice (a goal classifier fitted on true goal images,
+    kept in ``folder``); None for the rewards that are not a RewardModel (random, curiosity)."""
+    from zsrm.rewards import BaseReward, OracleReward, ZSRMReward
 
     if cfg.reward == "oracle":
         return OracleReward()
@@ -47,4 +49,14 @@ def make_reward(cfg: TrainConfig):
         from zsrm.fullmodel import load_reward_backbone
 
         return ZSRMReward(load_reward_backbone(cfg.reward_model), output=cfg.zsrm_output)
+    if cfg.reward == "base":
+        from zsrm.vlm import load_vlm
+
+        return BaseReward(load_vlm(cfg.vlm), camera=goal_camera(cfg.goal), mode="cosine")
+    if cfg.reward == "vice":
+        from zsrm.rl.vice import vice_reward
+
+        if folder is None:
+            raise ValueError("the vice reward needs a folder to keep its goal classifier in")
+        return vice_reward(cfg, folder)
     return None

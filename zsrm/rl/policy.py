@@ -19,6 +19,7 @@ from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor
 from zsrm.vlm.optim import check_optimizer, load_optimizer, read_checkpoint_state
 from zsrm.vlm.optim import save_checkpoint as save_checkpoint_folder
 from zsrm.vlm.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
+from zsrm.vlm.registry import save_weights as save_module_weights
 
 KIND = "zsrm-policy"
 
@@ -73,11 +74,18 @@ class PolicyBundle:
         return actions
 
 
-def save_checkpoint(folder: Path, model, cfg: TrainConfig, env_steps: int, rows: list[dict]) -> None:
-    """Policy weights, optimiser and the step count, swapped in atomically."""
+def save_checkpoint(folder: Path, model, cfg: TrainConfig, env_steps: int, rows: list[dict],
+                    extra: dict | None = None) -> None:
+    """Policy weights, optimiser and the step count, swapped in atomically; ``extra`` maps file
+    names to more modules to keep (the curiosity baseline's ICM)."""
     state = {"config": cfg.identity(), "env_steps": int(env_steps), "rows": rows}
-    save_checkpoint_folder(folder, lambda tmp: PolicyBundle(model.policy, cfg).save(tmp),
-                           model.policy.optimizer, state)
+
+    def save_weights(tmp):
+        PolicyBundle(model.policy, cfg).save(tmp)
+        for file, module in (extra or {}).items():
+            save_module_weights(module, tmp, file)
+
+    save_checkpoint_folder(folder, save_weights, model.policy.optimizer, state)
 
 
 def load_checkpoint(folder: Path, cfg: TrainConfig) -> dict | None:
@@ -88,10 +96,12 @@ def load_checkpoint(folder: Path, cfg: TrainConfig) -> dict | None:
     bundle = PolicyBundle.load(folder)
     check_optimizer(folder, bundle.policy.optimizer)  # before any work: a bad file is one line now
 
-    def restore(model):
+    def restore(model, extra: dict | None = None):
         model.policy.load_state_dict(bundle.policy.state_dict())
         load_optimizer(folder, model.policy.optimizer)
         model.num_timesteps = state["env_steps"] // cfg.action_repeat
+        for file, module in (extra or {}).items():
+            load_weights(module, folder, file)
 
     state["restore"] = restore
     return state

@@ -26,6 +26,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from zsrm.rewards import VecZeroShotReward
 from zsrm.rl.config import TrainConfig
+from zsrm.rl.curiosity import ICMUpdate, VecCuriosity
 from zsrm.rl.envs import goal_camera, make_reward, make_vec, task_entry
 from zsrm.rl.evaluate import evaluate, random_actions
 from zsrm.rl.features import VecImageFeatures
@@ -47,10 +48,11 @@ class EvalAndCheckpoint(BaseCallback):
     """Every ``eval_every`` env steps: the oracle metric on the eval envs (CSV + TensorBoard);
     every ``checkpoint_every``: a checkpoint. Also drives the progress bar."""
 
-    def __init__(self, cfg: TrainConfig, out: Path, vlm, rows: list[dict], progress, on_eval=None):
+    def __init__(self, cfg: TrainConfig, out: Path, vlm, rows: list[dict], progress, on_eval=None,
+                 extra_modules: dict | None = None):
         super().__init__()
         self.cfg, self.out, self.vlm, self.rows, self.progress = cfg, out, vlm, rows, progress
-        self.on_eval = on_eval
+        self.on_eval, self.extra_modules = on_eval, extra_modules
         self.next_eval = (rows[-1]["env_steps"] if rows else 0) + cfg.eval_every
         self.next_ckpt = self.next_eval - cfg.eval_every + cfg.checkpoint_every
         self.rewards: list[float] = []
@@ -67,7 +69,8 @@ class EvalAndCheckpoint(BaseCallback):
             self.evaluate()
             self.next_eval += self.cfg.eval_every
         if self.env_steps() >= self.next_ckpt:
-            save_checkpoint(self.out / "checkpoint", self.model, self.cfg, self.env_steps(), self.rows)
+            save_checkpoint(self.out / "checkpoint", self.model, self.cfg, self.env_steps(), self.rows,
+                            self.extra_modules)
             self.next_ckpt += self.cfg.checkpoint_every
         return True
 
@@ -128,26 +131,38 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     state = None if fresh else load_checkpoint(out / "checkpoint", cfg)
     if state is not None:
         done_steps, rows = state["env_steps"], state["rows"]
-    venv = make_vec(cfg, cfg.n_envs, cfg.seed * 10_000 + done_steps)
-    venv = VecImageFeatures(VecZeroShotReward(venv, make_reward(cfg), task_entry(cfg.goal).goal), vlm, camera)
+    venv, extra_callbacks, extra_modules = rewarded_env(cfg, out, done_steps)
+    venv = VecImageFeatures(venv, vlm, camera)
     model = build_ppo(cfg, venv)
     if state is not None:
-        state["restore"](model)
+        state["restore"](model, extra_modules)
     model.set_logger(configure(str(out / "tb"), ["tensorboard"]))
     # PPO stops only at a rollout's end: train whole rollouts, never past cfg.steps.
     rollout = cfg.n_envs * cfg.n_steps * cfg.action_repeat
     remaining = max(0, max(rollout, cfg.steps // rollout * rollout) - done_steps)
     with tqdm(total=cfg.steps, initial=done_steps, unit="step", desc=f"train {cfg.reward} {cfg.goal}",
               disable=not progress, smoothing=0.05) as bar:
-        callback = EvalAndCheckpoint(cfg, out, vlm, rows, bar, on_eval)
+        callback = EvalAndCheckpoint(cfg, out, vlm, rows, bar, on_eval, extra_modules)
         if remaining:
-            model.learn(remaining // cfg.action_repeat, callback=callback, reset_num_timesteps=state is None)
+            model.learn(remaining // cfg.action_repeat, callback=[*extra_callbacks, callback],
+                        reset_num_timesteps=state is None)
         final = evaluate(policy_act(model, cfg.eval_deterministic), cfg, FINAL_EPISODES, cfg.seed,
                          wrap=lambda v: VecImageFeatures(v, vlm, camera))
     venv.close()
     PolicyBundle(model.policy, cfg).save(out / "policy")
-    save_checkpoint(out / "checkpoint", model, cfg, callback.env_steps(), rows)
+    save_checkpoint(out / "checkpoint", model, cfg, callback.env_steps(), rows, extra_modules)
     return write_summary(cfg, out, final, rows, callback.env_steps())
+
+
+def rewarded_env(cfg: TrainConfig, out: Path, done_steps: int):
+    """The training envs with the reward ``cfg.reward`` names, the callbacks it needs while PPO
+    trains and the modules a checkpoint must keep for it (curiosity's ICM)."""
+    venv = make_vec(cfg, cfg.n_envs, cfg.seed * 10_000 + done_steps)
+    if cfg.reward == "curiosity":
+        curiosity = VecCuriosity(venv, goal_camera(cfg.goal), seed=cfg.seed)
+        return curiosity, [ICMUpdate(curiosity)], {"icm.safetensors": curiosity.icm}
+    reward = make_reward(cfg, out / "vice")
+    return VecZeroShotReward(venv, reward, task_entry(cfg.goal).goal), [], {}
 
 
 def finish_random(cfg: TrainConfig, out: Path) -> dict:

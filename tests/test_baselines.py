@@ -1,0 +1,67 @@
+"""The baselines' parts: VICE's goal classifier and its training frames, ICM's curiosity."""
+import numpy as np
+import pytest
+import torch
+
+from zsrm.rewards.vice import GoalClassifier, VICEReward, fit_goal_classifier
+from zsrm.rl.config import TrainConfig
+from zsrm.rl.curiosity import ICM, VecCuriosity
+from zsrm.rl.envs import make_vec
+from zsrm.rl.vice import goal_frames
+
+
+def test_vice_frames_hold_true_goal_images():
+    frames, labels = goal_frames(TrainConfig(goal="push_close", image_size=32), episodes=2)
+    assert frames.shape[1:] == (32, 32, 3) and frames.dtype == np.uint8
+    assert len(frames) == len(labels) and 0 < labels.sum() < len(labels)  # scripted rollouts reach the goal
+
+
+def test_goal_classifier_learns_saves_and_reloads(tmp_path):
+    rng = np.random.default_rng(0)
+    frames = rng.integers(0, 60, (40, 32, 32, 3), dtype=np.uint8)
+    labels = np.arange(40) % 2 == 0
+    frames[labels, 10:20, 10:20] = 250  # the "goal": a bright square
+    clf = fit_goal_classifier(frames, labels, image_size=32, steps=80, seed=0)
+    reward = VICEReward(clf, camera="tilted")
+    assert np.array_equal(reward({"tilted": frames}, "a goal"), labels.astype(np.float32))
+    clf.save(tmp_path)
+    again = GoalClassifier.from_folder(tmp_path)
+    with torch.no_grad():
+        assert torch.allclose(again(frames), clf(frames))
+
+
+def test_goal_classifier_needs_both_classes():
+    with pytest.raises(ValueError, match="goal and non-goal"):
+        fit_goal_classifier(np.zeros((4, 32, 32, 3), np.uint8), np.ones(4, bool), image_size=32)
+
+
+def test_icm_learns_what_the_action_did():
+    torch.manual_seed(0)
+    icm = ICM(action_dim=2, image_size=32)
+    rng = np.random.default_rng(0)
+    obs = np.zeros((64, 32, 32, 3), np.uint8)
+    obs[:, 12:20, 12:20] = 255  # a square the action moves left or right
+    actions = rng.uniform(-1, 1, (64, 2)).astype(np.float32)
+    next_obs = np.stack([np.roll(o, 4 if a[0] > 0 else -4, axis=1) for o, a in zip(obs, actions)])
+    opt = torch.optim.Adam(icm.parameters(), lr=1e-3)
+    history = []
+    for _ in range(150):
+        forward_error, inverse_loss = icm.losses(obs, actions, next_obs)
+        history.append(inverse_loss.item())
+        loss = icm.beta * forward_error.mean() + (1 - icm.beta) * inverse_loss
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    # The inverse model reads the move's direction from the two frames (only a[0]'s sign shows).
+    assert history[-1] < 0.7 * history[0]
+
+
+def test_curiosity_rewards_every_env_and_keeps_transitions():
+    venv = VecCuriosity(make_vec(TrainConfig(goal="push_close"), 3, 0), "tilted")
+    venv.reset()
+    for _ in range(4):
+        _, rewards, _, infos = venv.step(np.random.uniform(-1, 1, (3, 2)).astype(np.float32))
+        assert rewards.shape == (3,) and np.all(rewards >= 0)
+        assert all("curiosity_reward" in info for info in infos)
+    losses = venv.update(epochs=1, batch_size=4)
+    assert set(losses) == {"forward_loss", "inverse_loss"} and venv.transitions == []

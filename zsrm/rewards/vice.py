@@ -1,0 +1,104 @@
+"""VICE as the paper uses it (privileged baseline, section 3.2 b): a binary goal classifier
+trained on true goal images (positives) and other frames (negatives); reward 1 when it says
+the frame shows the goal, else 0.
+
+It is privileged: its training frames are labelled by the oracle (true state). The frames
+themselves come from a higher layer (:mod:`zsrm.rl.vice` rolls out scripted and random
+policies); this module only fits and applies the classifier.
+
+>>> import numpy as np
+>>> frames = np.zeros((8, 32, 32, 3), np.uint8); frames[4:, :, :16] = 255  # goal: left half white
+>>> labels = np.array([0, 0, 0, 0, 1, 1, 1, 1], bool)
+>>> clf = fit_goal_classifier(frames, labels, image_size=32, steps=60, seed=0)
+>>> VICEReward(clf, camera="front")({"front": frames}, "a white left half").tolist()
+[0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0]
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+from zsrm.rewards.interface import RewardModel, check_images
+from zsrm.vlm.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
+
+KIND = "zsrm-vice"
+
+
+@dataclass
+class GoalClassifierConfig:
+    image_size: int = 64
+    widths: tuple[int, int, int] = (16, 32, 32)
+
+
+class GoalClassifier(nn.Module):
+    """A small CNN: frames (N, H, W, 3) uint8 -> goal logits (N,)."""
+
+    def __init__(self, config: GoalClassifierConfig | None = None):
+        super().__init__()
+        self.config = config or GoalClassifierConfig()
+        layers, cin = [], 3
+        for cout in self.config.widths:
+            layers += [nn.Conv2d(cin, cout, 3, stride=2, padding=1), nn.ReLU()]
+            cin = cout
+        side = self.config.image_size // 2 ** len(self.config.widths)
+        self.net = nn.Sequential(*layers, nn.Flatten(), nn.Linear(cin * side * side, 64), nn.ReLU(), nn.Linear(64, 1))
+
+    def forward(self, images) -> torch.Tensor:
+        x = torch.as_tensor(np.ascontiguousarray(images)).permute(0, 3, 1, 2).float() / 255.0
+        if x.shape[-1] != self.config.image_size:
+            x = nn.functional.interpolate(x, size=self.config.image_size, mode="bilinear", align_corners=False)
+        return self.net(x).squeeze(-1)
+
+    def save(self, folder: str | Path, meta: dict | None = None) -> None:
+        save_folder(folder, {"kind": KIND, "config": asdict(self.config), "meta": meta or {}}, {WEIGHTS_FILE: self})
+
+    @classmethod
+    def from_folder(cls, folder: str | Path) -> "GoalClassifier":
+        """A classifier saved by :meth:`save`: config and weights checked before it is built."""
+        config = read_config(folder, kind=KIND, schema={"kind": str, "config": GoalClassifierConfig, "meta": dict})
+        model = build_model(folder, lambda: cls(config.config))
+        load_weights(model, folder)
+        return model.eval()
+
+
+def fit_goal_classifier(images: np.ndarray, labels: np.ndarray, image_size: int = 64, steps: int = 600,
+                        batch_size: int = 128, lr: float = 1e-3, seed: int = 0) -> GoalClassifier:
+    """Fit a classifier on frames and their oracle labels; batches are half positives, half
+    negatives (goal frames are rare in random play)."""
+    images, labels = check_images(images), np.asarray(labels, bool)
+    if len(images) != len(labels):
+        raise ValueError(f"{len(images)} frames but {len(labels)} labels")
+    pos, neg = np.flatnonzero(labels), np.flatnonzero(~labels)
+    if not len(pos) or not len(neg):
+        raise ValueError(f"need goal and non-goal frames, got {len(pos)} goal and {len(neg)} other frames")
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    model = GoalClassifier(GoalClassifierConfig(image_size=image_size))
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    target = torch.cat([torch.ones(batch_size // 2), torch.zeros(batch_size - batch_size // 2)])
+    for _ in range(steps):
+        idx = np.concatenate([rng.choice(pos, batch_size // 2), rng.choice(neg, batch_size - batch_size // 2)])
+        loss = nn.functional.binary_cross_entropy_with_logits(model(images[idx]), target)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    return model.eval()
+
+
+class VICEReward(RewardModel):
+    """1 when the goal classifier says the frame shows the goal (probability above 0.5)."""
+
+    name = "vice"
+
+    def __init__(self, classifier: GoalClassifier, camera: str):
+        self.classifier, self.camera = classifier.eval(), camera
+
+    @torch.no_grad()
+    def compute(self, observations: Mapping[str, np.ndarray] | None, goal: str,
+                infos: Sequence[dict] | None) -> np.ndarray:
+        return (self.classifier(self.images(observations)) > 0).float().numpy()
