@@ -35,6 +35,7 @@ results: setup
 	$(VENV)/bin/zsrm finetune --data data/zsrm/explore --out runs/zsrm/vlm
 	$(VENV)/bin/zsrm eval-reward --zsrm runs/zsrm/vlm --compare student=runs/zsrm/student --out results/reward_eval.json
 	$(PY) benchmarks/reward_speed.py --vlm runs/zsrm/vlm --student runs/zsrm/student --out results/reward_speed.json
+	OMP_NUM_THREADS=1 $(PY) benchmarks/robustness.py --out results/robustness.json
 
 clean:
 	rm -rf reports .pytest_cache

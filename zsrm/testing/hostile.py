@@ -13,7 +13,7 @@ run code, paths that cannot be written, a disk that fills up. Shared by
 >>> import tempfile
 >>> path = Path(tempfile.mkdtemp()) / "w.safetensors"
 >>> _ = path.write_bytes(b"12345678" * 8)
->>> WEIGHT_DAMAGE["empty"](path)
+>>> _ = WEIGHT_DAMAGE["empty"](path)
 >>> path.stat().st_size
 0
 """

@@ -56,9 +56,9 @@ def save_checkpoint(folder: Path, save_weights: Callable[[Path], None], opt: tor
     except OSError as err:
         shutil.rmtree(tmp, ignore_errors=True)
         raise output_error(folder, err) from None
-    except ZsrmFileError:
+    except ZsrmFileError as err:  # a failed write inside the new checkpoint: name the checkpoint
         shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        raise ZsrmFileError(str(err).replace(str(tmp), str(folder))) from None
 
 
 def read_checkpoint_state(folder: Path, identity: dict, fields: dict | None = None) -> dict:
