@@ -14,8 +14,8 @@ TINY = dict(steps=512, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_epi
 
 def test_trial_grid_names_and_configs():
     grid = trial_grid(["stack", "push_close"], ["oracle"], [0, 1], {"steps": 1000})
-    assert [t["name"] for t in grid] == ["stack-oracle-0", "stack-oracle-1", "push_close-oracle-0",
-                                         "push_close-oracle-1"]
+    assert [t["name"] for t in grid] == ["stack-oracle-0", "push_close-oracle-0", "stack-oracle-1",
+                                         "push_close-oracle-1"]  # seed-major
     assert all(t["config"]["steps"] == 1000 for t in grid)
 
 

@@ -100,10 +100,10 @@ class Sweep:
         check_writable(self.root, folder=True)
         check_writable(self.out)
         overrides = {"steps": self.steps}
-        ran = sweep(self.root, self.tasks, self.rewards, self.seeds, overrides, num_cpus=self.num_cpus,
-                    address=self.address)
-        print(f"ran {len(ran)} trial(s); the others were finished already")
         out = Path(self.out)
+        ran = sweep(self.root, self.tasks, self.rewards, self.seeds, overrides, num_cpus=self.num_cpus,
+                    address=self.address, kept=out.parent / "trials")
+        print(f"ran {len(ran)} trial(s); the others were finished already")
         names = [t["name"] for t in trial_grid(self.tasks, self.rewards, self.seeds, overrides)]
         kept = keep_trial_summaries(self.root, out.parent / "trials", names)
         summary = gather(kept)

@@ -40,9 +40,9 @@ class TrainConfig:
     """also a small CNN on the raw frame, trained by RL (sees the gripper, which the VLM hardly does)"""
     n_steps: int = 128
     """PPO rollout length per env"""
-    batch_size: int = 256
+    batch_size: int = 128
     """PPO minibatch size"""
-    n_epochs: int = 4
+    n_epochs: int = 10
     """PPO epochs per rollout"""
     learning_rate: float = 3e-4
     """Adam learning rate"""

@@ -27,18 +27,20 @@ from zsrm.rl.evaluate import mean_se
 
 
 def trial_grid(tasks, rewards, seeds, overrides: dict | None = None) -> list[dict]:
-    """One trial per task x reward x seed: its name and its TrainConfig as a dict."""
+    """One trial per task x reward x seed: its name and its TrainConfig as a dict. Seed-major,
+    so a sweep cut short has every task and reward on its first seeds."""
     trials = []
-    for task in tasks:
-        for reward in rewards:
-            for seed in seeds:
+    for seed in seeds:
+        for task in tasks:
+            for reward in rewards:
                 cfg = TrainConfig(**{**(overrides or {}), "goal": task, "reward": reward, "seed": int(seed)})
                 trials.append({"name": f"{task}-{reward}-{seed}", "config": cfg.to_dict()})
     return trials
 
 
-def is_finished(folder: Path, config: dict) -> bool:
-    path = folder / "summary.json"
+def is_finished(path: Path, config: dict) -> bool:
+    """Does ``path`` (a run folder, or a kept ``<name>.json`` summary) hold a finished run of ``config``?"""
+    path = path / "summary.json" if path.is_dir() else path
     if not path.is_file():
         return False
     try:
@@ -64,15 +66,18 @@ def run_trial(trial: dict) -> dict:
 
 
 def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | None = None, num_cpus: int = 2,
-          address: str | None = None, cpus_per_trial: float = 1.0) -> list[str]:
-    """Run every unfinished trial of the grid on Ray Tune; returns the names that ran."""
+          address: str | None = None, cpus_per_trial: float = 1.0, kept: str | Path | None = None) -> list[str]:
+    """Run every unfinished trial of the grid on Ray Tune; returns the names that ran. A trial
+    is finished when its run folder under ``root``, or its kept summary ``kept/<name>.json``
+    (see :func:`keep_trial_summaries`), holds a finished run with the same settings."""
     import ray
     from ray import tune
 
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
     todo = [t for t in trial_grid(tasks, rewards, seeds, overrides)
-            if not is_finished(root / t["name"], t["config"])]
+            if not is_finished(root / t["name"], t["config"])
+            and not (kept and is_finished(Path(kept) / f"{t['name']}.json", t["config"]))]
     if not todo:
         return []
     for t in todo:
@@ -127,6 +132,7 @@ def keep_trial_summaries(root: str | Path, dest: str | Path, names) -> list[Path
         src = Path(root) / name / "summary.json"
         if src.is_file():
             (dest / f"{name}.json").write_text(src.read_text())
+        if (dest / f"{name}.json").is_file():
             kept.append(dest / f"{name}.json")
     return kept
 
