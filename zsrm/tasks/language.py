@@ -227,6 +227,12 @@ def _chunk(tokens: list[str]) -> list[_Mention]:
     return mentions
 
 
+def _quote(words: str, width: int = 60) -> str:
+    """Words of the sentence, quoted for a message: on one line, shortened when long."""
+    words = " ".join(words.split())
+    return repr(words if len(words) <= width else words[:width - 4].rsplit(" ", 1)[0] + " ...")
+
+
 def _closest(word: str, known) -> str | None:
     match = difflib.get_close_matches(word, list(known), n=1, cutoff=0.6)
     return match[0] if match else None
@@ -244,16 +250,16 @@ def _check_objects(tokens: list[str], mentions: list[_Mention]) -> str:
     colours = [c for m in mentions for c in m.colours]
     unknown = [c for c in colours if c not in COLOURS]
     if unknown:
-        raise _Refusal("unknown colour", f"unknown colour {unknown[0]!r}", f"known colours: {', '.join(COLOURS)}",
+        raise _Refusal("unknown colour", f"unknown colour {_quote(unknown[0])}", f"known colours: {', '.join(COLOURS)}",
                        _replaced(tokens, {c: _closest(c, COLOURS) for c in unknown}))
     nouns = [m.noun for m in mentions if m.noun is not None and m.noun not in SHAPE_WORDS]
     if nouns:
-        raise _Refusal("unknown object", f"unknown object {nouns[0]!r}",
+        raise _Refusal("unknown object", f"unknown object {_quote(nouns[0])}",
                        f"known objects: {', '.join(SHAPES)} (also cube, object, one)",
                        _replaced(tokens, {n: _closest(n, ("block", "cube", "puck")) or "object" for n in nouns}))
     colourless = next((m for m in mentions if not m.colours and not m.self_ref), None)
     if colourless is not None:
-        raise _Refusal("no colour", f"{' '.join(tokens[colourless.start:colourless.end])!r} names no colour",
+        raise _Refusal("no colour", f"{_quote(' '.join(tokens[colourless.start:colourless.end]))} names no colour",
                        f"name each object by its colour: {', '.join(COLOURS)}")
     shapes = {SHAPE_WORDS[m.noun] for m in mentions if m.noun} - {None}
     if len(shapes) > 1:
@@ -289,7 +295,7 @@ def _no_relation(tokens: list[str], mentions: list[_Mention], link: str | None) 
     """The refusal for two objects without a relation; the fix respells a misspelt one."""
     known = ", ".join(RELATION_WORDS[r][0] for r in RELATIONS)
     names = " and ".join(f"the {m.phrase}" for m in mentions[:2])
-    what = f"no relation between {names}" + (f" ({link!r} is not one)" if link else "")
+    what = f"no relation between {names}" + (f" ({_quote(link)} is not one)" if link else "")
     fix = None
     words = (link or "").split()
     wordings = [w for ws in RELATION_WORDS.values() for w in ws]
@@ -340,7 +346,7 @@ def _check_words(tokens: list[str], lead_end: int, tail_start: int) -> None:
         keep_lead = all(w in LEAD_WORDS for w in lead)
         keep_tail = all(w in TAIL_WORDS for w in tail)
         fix = (lead if keep_lead else []) + tokens[lead_end:tail_start] + (tail if keep_tail else [])
-        raise _Refusal("extra words", f"words zsrm cannot read: {' '.join(unknown)!r}", fix=fix)
+        raise _Refusal("extra words", f"words zsrm cannot read: {_quote(' '.join(unknown))}", fix=fix)
 
 
 def _read(tokens: list[str]) -> Task:
@@ -373,11 +379,11 @@ def parse_goal(text: str) -> Task:
     """
     if not isinstance(text, str) or not text.strip():
         raise GoalError("empty goal: write a sentence such as 'a yellow block on top of a red block'", "empty")
-    shown = " ".join(text.split())
+    shown = _quote(text, width=160)
     try:
         return _read(_normalise(text))
     except _Refusal as r:
         suggestion = _suggest(r.fix)
-        message = f"cannot read {shown!r}: {r.what}" + (f"; {r.hint}" if r.hint else "")
+        message = f"cannot read {shown}: {r.what}" + (f"; {r.hint}" if r.hint else "")
         message += f"; did you mean {suggestion!r}?" if suggestion else ""
         raise GoalError(message, r.reason, suggestion) from None
