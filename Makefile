@@ -11,7 +11,7 @@ setup:
 	@bash tools/setup.sh
 
 demo: setup
-	$(VENV)/bin/zsrm demo --out $(REPORT)
+	$(VENV)/bin/zsrm reproduce --scale demo --report $(REPORT)
 
 test: setup
 	$(PY) -m pytest

@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
-# Idempotent setup: Debian packages for offscreen MuJoCo rendering, a virtual
-# environment in .venv, and the pinned Python dependencies (constraints.txt).
+# Idempotent setup: Debian packages for offscreen MuJoCo rendering and Chromium (the report's
+# headless-browser test), a virtual environment in .venv, and the pinned Python dependencies
+# (constraints.txt).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${VENV:-.venv}
 PYTHON=${PYTHON:-$(command -v python3.11 || command -v python3)}
 
 need_apt=()
-for pkg in libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6; do
+for pkg in libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 chromium; do
   dpkg -s "$pkg" >/dev/null 2>&1 || need_apt+=("$pkg")
 done
 # Debian's python3 needs python3-venv (ensurepip) for `python3 -m venv`.

@@ -88,6 +88,7 @@ class Sweep:
     steps: int = 300_000  # env steps per trial
     num_cpus: int = 2  # CPUs of the local Ray (one trial per CPU)
     address: str | None = None  # a Ray cluster to join instead (auto, or ray://HOST:PORT)
+    reward_model: str = "student"  # the zsrm reward's model folder, or student (the shipped one)
     out: str = "results/rl/learning.json"  # the gathered summary; the plot beside it (.png), trials in trials/
 
     def run(self) -> int:
@@ -99,7 +100,7 @@ class Sweep:
             raise ValueError(f"unknown rewards {', '.join(sorted(unknown))}; choose from {', '.join(REWARDS)}")
         check_writable(self.root, folder=True)
         check_writable(self.out)
-        overrides = {"steps": self.steps}
+        overrides = {"steps": self.steps, "reward_model": self.reward_model}
         out = Path(self.out)
         ran = sweep(self.root, self.tasks, self.rewards, self.seeds, overrides, num_cpus=self.num_cpus,
                     address=self.address, kept=out.parent / "trials")
@@ -122,3 +123,21 @@ class Sweep:
                 "command": f"zsrm sweep --tasks {' '.join(self.tasks)} --rewards {' '.join(self.rewards)} "
                            f"--seeds {' '.join(map(str, self.seeds))} --steps {self.steps} --out {self.out}",
                 "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU"}
+
+
+@dataclass
+class Plot:
+    """Figure 6 of the paper from a sweep's gathered summary: one panel per task, one line per reward."""
+
+    summary: str = "results/rl/learning.json"  # a summary written by zsrm sweep
+    figure6: str = "results/rl/figure6.png"  # where to write Figure 6
+
+    def run(self) -> int:
+        from zsrm.evaluation.learning_curves import plot_learning_curves
+        from zsrm.vlm.files import read_json
+
+        summary = {task: rewards for task, rewards in read_json(self.summary).items() if task != "meta"}
+        if not summary:
+            raise ValueError(f"{self.summary} holds no finished trials; run zsrm sweep first")
+        print(f"wrote {plot_learning_curves(summary, self.figure6, title='oracle episode reward while training')}")
+        return 0

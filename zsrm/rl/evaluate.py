@@ -112,9 +112,9 @@ class FirstEpisodeFrames:
 
             def step_wait(self):
                 obs, rewards, dones, infos = self.venv.step_wait()
-                if not keep.done:
-                    last = infos[0]["terminal_observation"] if dones[0] else obs
-                    keep.frames.append(np.array(last[keep.camera][0]))
+                if not keep.done:  # a done env's last frame is its terminal observation (not batched)
+                    last = infos[0]["terminal_observation"][keep.camera] if dones[0] else obs[keep.camera][0]
+                    keep.frames.append(np.array(last))
                     keep.done = bool(dones[0])
                 return obs, rewards, dones, infos
 

@@ -63,8 +63,7 @@ class EvalAndCheckpoint(BaseCallback):
 
     def _on_step(self) -> bool:
         self.rewards.append(float(np.mean(self.locals["rewards"])))
-        self.progress.n = min(self.env_steps(), self.cfg.steps)
-        self.progress.refresh()
+        self.progress.update(min(self.env_steps(), self.cfg.steps) - self.progress.n)
         if self.env_steps() >= self.next_eval:
             self.evaluate()
             self.next_eval += self.cfg.eval_every

@@ -1,0 +1,180 @@
+"""The report of ``zsrm reproduce``: ``index.html`` and the same as ``README.md``, read top to
+bottom: what ran, on what machine, with which VLM; what the run learned; then the figures the
+committed results hold (``results/``), each with the command that reproduces it.
+
+The HTML marks every figure it shows; once the page has loaded, a small script writes how many
+loaded into ``<body data-figures-loaded="N/M">`` (the headless-browser test reads it).
+"""
+from __future__ import annotations
+
+import html
+import json
+import os
+import platform
+import shutil
+import time
+from pathlib import Path
+
+from zsrm.vlm.files import write_json, write_text
+
+RESULTS = Path("results")
+
+
+def machine() -> str:
+    return f"{platform.platform()}, {platform.machine()}, {os.cpu_count()} CPU cores, no GPU used"
+
+
+class Report:
+    """Sections of text, tables and figures, rendered as Markdown and as HTML."""
+
+    def __init__(self, folder: Path):
+        self.folder = folder
+        self.md: list[str] = []
+        self.html: list[str] = []
+        self.figures = 0
+
+    def heading(self, text: str, level: int = 2):
+        self.md += ["#" * level + " " + text, ""]
+        self.html.append(f"<h{level}>{html.escape(text)}</h{level}>")
+
+    def text(self, text: str):
+        self.md += [text, ""]
+        self.html.append(f"<p>{html.escape(text)}</p>")
+
+    def command(self, cmd: str):
+        self.md += [f"`{cmd}`", ""]
+        self.html.append(f"<pre><code>{html.escape(cmd)}</code></pre>")
+
+    def table(self, header: list[str], rows: list[list]):
+        self.md += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        self.md += ["| " + " | ".join(map(str, r)) + " |" for r in rows] + [""]
+        cells = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+        body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
+        self.html.append(f"<table><tr>{cells}</tr>{body}</table>")
+
+    def figure(self, source: Path, caption: str):
+        """Copy ``source`` into the report's figures/ and show it."""
+        if not source.is_file():
+            self.text(f"(missing: {source})")
+            return
+        dest = self.folder / "figures" / source.name
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        if source.resolve() != dest.resolve():
+            shutil.copyfile(source, dest)
+        rel = f"figures/{source.name}"
+        self.figures += 1
+        self.md += [f"![{caption}]({rel})", "", f"*{caption}*", ""]
+        self.html.append(f'<figure><img class="figure" src="{html.escape(rel)}" alt="{html.escape(caption)}">'
+                         f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+
+    def write(self, title: str) -> Path:
+        write_text(self.folder / "README.md", "\n".join([f"# {title}", ""] + self.md) + "\n")
+        page = ["<!doctype html><html><head><meta charset='utf-8'>", f"<title>{html.escape(title)}</title>",
+                "<style>body{font-family:sans-serif;max-width:1000px;margin:2em auto;line-height:1.4}"
+                "img{max-width:100%}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px}"
+                "pre{background:#f4f4f4;padding:6px}</style></head><body>", f"<h1>{html.escape(title)}</h1>",
+                *self.html, COUNT_FIGURES, "</body></html>"]
+        return write_text(self.folder / "index.html", "\n".join(page) + "\n")
+
+
+COUNT_FIGURES = """<script>
+window.addEventListener("load", function () {
+  var figures = document.querySelectorAll("img.figure"), ok = 0;
+  figures.forEach(function (img) { if (img.complete && img.naturalWidth > 0) ok++; });
+  document.body.setAttribute("data-figures-loaded", ok + "/" + figures.length);
+});
+</script>"""
+
+
+def write_report(folder: Path, scale: str, vlm: str, log: list[dict], workdir: Path, wall_s: float) -> Path:
+    """Write the report of a ``zsrm reproduce`` run; at the demo scale also ``results/demo.json``."""
+    from zsrm.pipeline.reproduce import demo_result
+
+    folder.mkdir(parents=True, exist_ok=True)
+    report = Report(folder)
+    report.text(f"zsrm reproduce --scale {scale}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, on "
+                f"{machine()}. VLM: {vlm}" + (" (zsrm's offline stand-in for CLIP)" if vlm == "scene" else "") +
+                f". Wall time {wall_s / 60:.1f} min.")
+    report.heading("Stages")
+    report.table(["stage", "what", "seconds", "cached", "command"],
+                 [[e["stage"], e["what"], f"{e['seconds']:.0f}", "yes" if e.get("cached") else "no", e["command"]]
+                  for e in log])
+    if scale in ("demo", "tiny"):
+        from zsrm.pipeline.reproduce import SCALES
+
+        result = demo_result(log, wall_s, SCALES[scale]["task"])
+        write_json(RESULTS / "demo.json" if scale == "demo" else folder / "demo.json", result)
+        demo_section(report, result, workdir)
+    committed_results(report)
+    return report.write(f"zsrm report ({scale} scale)")
+
+
+def demo_section(report: Report, result: dict, workdir: Path):
+    from zsrm.evaluation.learning_curves import plot_learning_curves
+
+    task = result["task"]
+    report.heading("A policy learns from a sentence")
+    report.text(f"PPO trained on {task} with the zsrm reward (the shipped student reward model, binarised: "
+                f"1 when the goal sentence beats its negatives on the frame) for {result['zsrm_policy_env_steps']} "
+                f"env steps, against a uniform random policy; oracle episode reward (steps of 100 in the goal "
+                f"relation, read from the true state for evaluation only) over {result['episodes']} seeded episodes.")
+    report.table(["policy", "oracle episode reward", "s.e."],
+                 [["trained with the zsrm reward", f"{result['zsrm_policy_mean']:.1f}", f"{result['zsrm_policy_se']:.1f}"],
+                  ["random", f"{result['random_policy_mean']:.1f}", f"{result['random_policy_se']:.1f}"]])
+    summary = json.loads((workdir / "policy_zsrm" / "summary.json").read_text())
+    rand = json.loads((workdir / "policy_random" / "summary.json").read_text())
+    curves = {task: {"zsrm": {"curve": [{**r, "se": r["se"]} for r in summary["curve"]], "seeds": 1,
+                              "final_mean": summary["final_mean"], "final_se": summary["final_se"]},
+                     "random": {"curve": [], "seeds": 1, "final_mean": rand["final_mean"], "final_se": rand["final_se"]}}}
+    png = plot_learning_curves(curves, workdir / "gifs" / "demo_learning.png")
+    report.figure(png, "oracle episode reward of the zsrm-trained policy while it trains (s.e. over evaluation episodes)")
+    report.figure(workdir / "gifs" / "zsrm_policy.gif", "one episode of the policy trained with the zsrm reward")
+    report.figure(workdir / "gifs" / "random_policy.gif", "one episode of a random policy")
+    report.command(f"zsrm train --goal {task} --reward zsrm --seed 0 --steps {result['zsrm_policy_env_steps']}")
+
+
+def _load(name: str):
+    path = RESULTS / name
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def committed_results(report: Report):
+    """The figures of the committed results (the cpu scale, run on a 2-core CPU machine)."""
+    report.heading("Committed results (cpu scale)")
+    report.text("What make results and the sweeps have produced on this project's 2-core CPU machine, "
+                "committed under results/.")
+    report.heading("Grounding: Grad-CAM finds the objects (Figure 3)", 3)
+    report.figure(RESULTS / "figure3.png", "Grad-CAM heat maps of object phrases and their argmax")
+    grounding = _load("grounding.json") or {}
+    report.table(["relation", "labeler F1"], [[k.split(".", 1)[1], f"{v:.2f}"] for k, v in grounding.items()
+                                                 if k.startswith("f1.")])
+    report.command("zsrm eval-grounding data/grounding --out results/grounding.json --figure results/figure3.png")
+    report.heading("Base reward against the full reward along trajectories (Figure 5)", 3)
+    report.figure(RESULTS / "figure5.png", "base reward along a scripted push: it does not capture 'close to'")
+    for task in ("stack", "place_right", "push_close"):
+        report.figure(RESULTS / "reward_curves" / f"{task}.png", f"base and zsrm reward along {task} episodes")
+    reward = _load("reward_eval.json") or {}
+    rows = [[task, *(f"{reward.get(m, {}).get(task, {}).get('f1', float('nan')):.2f}" for m in ("zsrm", "student", "base"))]
+            for task in ("stack", "place_left", "place_right", "push_close")]
+    report.table(["task", "zsrm F1 (fine-tuned VLM)", "student F1", "base F1"], rows)
+    report.command("zsrm eval-reward --zsrm runs/zsrm/vlm --compare student=runs/zsrm/student --out results/reward_eval.json")
+    learning_section(report)
+    report.heading("Multi-task policy (Table 2)", 3)
+    if (RESULTS / "table2.md").is_file():
+        report.md += [(RESULTS / "table2.md").read_text(), ""]
+        report.figure(RESULTS / "table2.png", "Table 2: language, primitive-code and unconditioned policies")
+    else:
+        report.text("Not produced yet: the distillation stage (zsrm distill, issue 14) has not landed.")
+
+
+def learning_section(report: Report):
+    report.heading("Learning from the rewards (Figure 6)", 3)
+    learning = _load("rl/learning.json")
+    if not learning:
+        report.text("No sweep results committed yet (zsrm sweep writes results/rl/learning.json).")
+        return
+    rows = [[task, reward, f"{v['final_mean']:.1f}", f"{v['final_se']:.1f}", v["seeds"], v["steps"]]
+            for task, rewards in learning.items() if task != "meta" for reward, v in rewards.items()]
+    report.table(["task", "reward", "oracle episode reward", "s.e. over seeds", "seeds", "env steps"], rows)
+    report.figure(RESULTS / "rl" / "learning.png", "oracle episode reward while training, mean and s.e. over seeds")
+    report.command(learning.get("meta", {}).get("command", "zsrm sweep"))
