@@ -14,16 +14,27 @@ standard error over seeds of each run's final oracle episode reward, and the cur
 >>> from zsrm.rl.sweep import trial_grid
 >>> [t["name"] for t in trial_grid(["stack"], ["oracle", "zsrm"], [0])]
 ['stack-oracle-0', 'stack-zsrm-0']
+>>> trial_name("a red block on the right of a green block", "zsrm", 0)
+'a_red_block_on_the_right_of_a_green_block-zsrm-0'
 """
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.evaluate import mean_se
+
+
+def trial_name(task: str, reward: str, seed: int) -> str:
+    """A trial's folder name: ``<task>-<reward>-<seed>``, the task (a catalogue name or a goal
+    sentence) made filesystem-safe: each run of characters other than letters, digits and
+    ``_`` becomes one ``_`` (as ``zsrm train`` names its default folder), so catalogue names
+    such as ``stack`` keep their names."""
+    return f"{re.sub(r'[^A-Za-z0-9_]+', '_', task.strip())}-{reward}-{seed}"
 
 
 def trial_grid(tasks, rewards, seeds, overrides: dict | None = None) -> list[dict]:
@@ -34,7 +45,7 @@ def trial_grid(tasks, rewards, seeds, overrides: dict | None = None) -> list[dic
         for task in tasks:
             for reward in rewards:
                 cfg = TrainConfig(**{**(overrides or {}), "goal": task, "reward": reward, "seed": int(seed)})
-                trials.append({"name": f"{task}-{reward}-{seed}", "config": cfg.to_dict()})
+                trials.append({"name": trial_name(task, reward, seed), "config": cfg.to_dict()})
     return trials
 
 
