@@ -38,6 +38,8 @@ class TrainConfig:
     """spatial-softmax keypoints the policy reads from the VLM feature map"""
     pixels: bool = True
     """also a small CNN on the raw frame, trained by RL (sees the gripper, which the VLM hardly does)"""
+    aux_inverse: bool = True
+    """train the keypoints with a self-supervised inverse-dynamics loss too (they learn where the agent is)"""
     n_steps: int = 128
     """PPO rollout length per env"""
     batch_size: int = 128

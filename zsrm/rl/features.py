@@ -121,8 +121,12 @@ class KeypointExtractor(BaseFeaturesExtractor):
         width = 3 * keypoints + (self.pixels.out_dim if pixels else 0)
         self.out = nn.Sequential(nn.Linear(width, features_dim), nn.ReLU())
 
-    def forward(self, observations: dict) -> torch.Tensor:
+    def points(self, observations: dict) -> torch.Tensor:
+        """The keypoints (x, y, strength) of both branches, before the linear layer."""
         points = self.softmax(self.heat(observations[FEATURES_KEY]))
         if self.pixels is not None:
             points = torch.cat([points, self.pixels(observations[IMAGE_KEY])], dim=1)
-        return self.out(points)
+        return points
+
+    def forward(self, observations: dict) -> torch.Tensor:
+        return self.out(self.points(observations))

@@ -25,6 +25,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
 from zsrm.rewards import VecZeroShotReward
+from zsrm.rl.auxiliary import InverseDynamicsAux
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.curiosity import ICMUpdate, VecCuriosity
 from zsrm.rl.envs import goal_camera, make_reward, make_vec, task_entry
@@ -133,6 +134,10 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     venv, extra_callbacks, extra_modules = rewarded_env(cfg, out, done_steps)
     venv = VecImageFeatures(venv, vlm, camera)
     model = build_ppo(cfg, venv)
+    if cfg.aux_inverse:
+        points_dim = model.policy.features_extractor.out[0].in_features
+        aux = InverseDynamicsAux(points_dim, venv.action_space.shape[0], seed=cfg.seed)
+        extra_callbacks, extra_modules = [*extra_callbacks, aux], {**extra_modules, "inverse.safetensors": aux.model_inverse}
     if state is not None:
         state["restore"](model, extra_modules)
     model.set_logger(configure(str(out / "tb"), ["tensorboard"]))
