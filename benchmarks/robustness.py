@@ -18,7 +18,8 @@ ran code from a file (a pickle whose loading would create a marker file; must be
   (finetune, pretrain-vlm, train) and of a data shard;
 * unwritable_output: every command that writes, its output below a regular file and in a
   read-only place;
-* full_disk: every command that writes (but sweep, whose writes happen in Ray workers) with
+* full_disk: every command that writes (but sweep, whose writes happen in Ray workers, plot,
+  which needs a sweep's summary, and reproduce, which runs the commands counted here) with
   each atomic write failing with ENOSPC, and collect and label filling the disk mid-run, then
   rerun to the same data;
 * kill_and_resume: collect, label, finetune, pretrain-vlm and train killed (SIGKILL) after
@@ -153,7 +154,8 @@ def checkpoint_cases(tally: Tally, data: Path, tmp: Path, marker: Path) -> None:
     ckpts = {"finetune": tmp / "ft.work" / "checkpoint", "pretrain-vlm": tmp / "pt.work" / "checkpoint",
              "train": tmp / "rl" / "checkpoint"}
     for stage, argv in runs.items():
-        assert cli(argv)[0] == 0, stage
+        rc, err = cli(argv)
+        assert rc == 0, f"{stage}: {err[-3000:]}"
         for name in ("summary.json",):
             (tmp / "rl" / name).unlink(missing_ok=True)
         good = ckpts[stage].with_name("checkpoint.good")
@@ -228,6 +230,8 @@ def writers(tmp: Path, out: Path, data: Path) -> dict[str, list]:
         "rollout": ["rollout", "random:stack", "--episodes", "1", "--out", out / "x.json"],
         "sweep": ["sweep", "--root", out, "--tasks", "stack", "--rewards", "random", "--seeds", "0",
                   "--out", tmp / f"sweep-{out.name}.json"],
+        "plot": ["plot", "--summary", tmp / "learning.json", "--figure6", out / "figure6.png"],
+        "reproduce": ["reproduce", "--workdir", out, "--report", tmp / f"report-{out.name}"],
     }
 
 
@@ -236,8 +240,9 @@ def output_cases(tally: Tally, data: Path, tmp: Path) -> None:
         for command, argv in writers(tmp, out, data).items():
             check(tally, "unwritable_output", f"{command}, output {where}", argv, out)
     for command in writers(tmp, tmp, data):
-        if command == "sweep":
-            continue  # its trials write from Ray worker processes, which this process cannot make full
+        if command in ("sweep", "plot", "reproduce"):
+            continue  # sweep's trials write from Ray workers, which this process cannot make full; plot needs
+            # a sweep's summary; reproduce runs the stages counted here one by one
         argv = writers(tmp, tmp / "full" / command, data)[command]
         with H.full_disk():
             rc, err = cli(argv)

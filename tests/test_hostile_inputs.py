@@ -201,6 +201,8 @@ def writer_commands(tmp_path, out, dataset) -> dict[str, list[str]]:
         "train": ["train", "--out", str(out), "--steps", "64"],
         "rollout": ["rollout", "random:stack", "--episodes", "1", "--out", str(out / "x.json")],
         "sweep": ["sweep", "--root", str(out), "--out", str(tmp_path / "sweep.json")],
+        "plot": ["plot", "--summary", str(tmp_path / "learning.json"), "--figure6", str(out / "figure6.png")],
+        "reproduce": ["reproduce", "--workdir", str(out), "--report", str(tmp_path / "report")],
     }
 
 
@@ -212,14 +214,15 @@ def test_every_writing_command_is_listed():
 
 @pytest.mark.parametrize("command", ["collect", "render", "scripted-eval", "reward-curve", "eval-reward", "label",
                                      "finetune", "eval-grounding", "reward-data", "pretrain-vlm", "eval-vlm",
-                                     "demo", "train", "rollout", "sweep"])
+                                     "demo", "train", "rollout", "sweep", "plot", "reproduce"])
 def test_an_unwritable_output_is_one_line_before_any_work(command, dataset, tmp_path, capsys, monkeypatch):
     def no_work(*args, **kwargs):
         raise AssertionError("work started before the output was checked")
 
     for target in ("zsrm.data.collect.collect", "zsrm.vlm.factory.load_vlm", "zsrm.rl.ppo.train",
                    "zsrm.rl.evaluate.rollout", "zsrm.rl.sweep.sweep", "zsrm.fullmodel.training.finetune",
-                   "zsrm.evaluation.scripted_success.scripted_success", "zsrm.pipeline.demo.write_reward_curves"):
+                   "zsrm.evaluation.scripted_success.scripted_success", "zsrm.pipeline.demo.write_reward_curves",
+                   "zsrm.pipeline.reproduce.run_stages"):
         monkeypatch.setattr(target, no_work)
     for where, out in H.unwritable_paths(tmp_path).items():
         assert main(writer_commands(tmp_path, out, dataset)[command]) == 2, where

@@ -136,6 +136,7 @@ class Plot:
         from zsrm.evaluation.learning_curves import plot_learning_curves
         from zsrm.vlm.files import read_json
 
+        check_writable(self.figure6)
         summary = {task: rewards for task, rewards in read_json(self.summary).items() if task != "meta"}
         if not summary:
             raise ValueError(f"{self.summary} holds no finished trials; run zsrm sweep first")
