@@ -1,0 +1,178 @@
+"""The three distilled policies of the paper's section 3.3, one class.
+
+* ``language``: the image encoding and the goal's text embedding, each through an fc layer,
+  concatenated, then two fc layers to the action;
+* ``primitive``: the same with a one-hot primitive code (the index of a training task) in
+  place of the text; a goal is mapped to the training task whose text embedding is nearest in
+  L2 distance (:meth:`DistilledPolicy.condition`), so test goals get a training task's code;
+* ``none``: two fc layers on the image encoding alone.
+
+Image towers: ``resnet18`` (torchvision's, the paper's; ImageNet weights when the user has
+them) or ``scene`` (the scene VLM's image trunk, its Grad-CAM layer, read by spatial-softmax
+keypoints as the RL policies read it). Saved as one folder: ``config.json`` (kind
+``zsrm-multitask-policy``, :class:`PolicyConfig`) and ``model.safetensors``, never pickle.
+The training tasks' text embeddings are kept in the weights (``goal_embeddings``).
+
+>>> cfg = PolicyConfig(conditioning="primitive", tower="scene", image_size=64, action_dim=3, text_dim=8,
+...                    goals=("a red block on top of a green block", "a green block on top of a red block"),
+...                    scene=SceneConfig(widths=(8, 8, 8), groups=4), hidden=16, keypoints=4)
+>>> policy = DistilledPolicy(cfg)
+>>> images = torch.zeros(5, 3, 64, 64, dtype=torch.uint8)
+>>> tuple(policy(images, torch.zeros(5, dtype=torch.long)).shape)
+(5, 3)
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Literal
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from zsrm.rl.features import SpatialSoftmax
+from zsrm.vlm.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
+from zsrm.vlm.scene import SceneConfig, SceneImageTower
+
+KIND = "zsrm-multitask-policy"
+CONDITIONINGS = ("language", "primitive", "none")
+IMAGENET_MEAN, IMAGENET_STD = (0.485, 0.456, 0.406), (0.229, 0.224, 0.225)
+
+
+@dataclass
+class PolicyConfig:
+    """A distilled policy's architecture and what it reads (saved in config.json)."""
+
+    conditioning: Literal["language", "primitive", "none"]
+    tower: Literal["scene", "resnet18"]
+    image_size: int  # frames are (image_size, image_size) from `camera`
+    action_dim: int
+    text_dim: int  # size of the goal's text embedding
+    goals: tuple[str, ...]  # the training tasks' goal sentences: primitive code i is goals[i]
+    scene: SceneConfig | None = None  # the scene tower's architecture (tower scene)
+    hidden: int = 256  # width of the fc layers
+    keypoints: int = 32  # spatial-softmax keypoints on the scene tower's map
+    vlm: str = "scene"  # the VLM whose text tower embeds goals
+    text_embedding: Literal["language", "joint"] = "language"  # see zsrm.policy.models.embed_goals
+    camera: str = "front"
+    action_repeat: int = 2  # control steps per decision, as the task policies acted
+
+    def __post_init__(self):
+        if self.conditioning not in CONDITIONINGS:
+            raise ValueError(f"unknown conditioning {self.conditioning!r}; choose one of {', '.join(CONDITIONINGS)}")
+        if self.tower == "scene" and self.scene is None:
+            self.scene = SceneConfig()
+        if min(self.image_size, self.action_dim, self.text_dim, len(self.goals), self.hidden, self.keypoints) < 1:
+            raise ValueError("image_size, action_dim, text_dim, hidden, keypoints and the goals must be positive")
+
+
+def resnet18(pretrained: bool) -> nn.Module:
+    """torchvision's ResNet18 without its classifier (512 features); ``pretrained``: its
+    ImageNet weights, which torchvision downloads on first use (one clear line offline)."""
+    from zsrm.vlm.compat import import_torchvision
+
+    tv = import_torchvision()
+    try:
+        net = tv.models.resnet18(weights="IMAGENET1K_V1" if pretrained else None)
+    except (OSError, RuntimeError) as err:  # URLError is an OSError
+        raise ValueError(f"cannot get ResNet18's ImageNet weights ({str(err).splitlines()[0][:120]}): put "
+                         "resnet18-f37072fd.pth in torch's hub cache, pass --no-pretrained, or use --tower scene") \
+            from None
+    net.fc = nn.Identity()
+    return net
+
+
+class ImageEncoder(nn.Module):
+    """uint8 frames (N, 3, H, W) -> a feature vector per frame (``out_dim``)."""
+
+    def __init__(self, cfg: PolicyConfig, pretrained: bool = False):
+        super().__init__()
+        if cfg.tower == "resnet18":
+            mean, std = IMAGENET_MEAN, IMAGENET_STD
+            self.net, self.out_dim = resnet18(pretrained), 512
+        else:
+            mean, std = cfg.scene.mean, cfg.scene.std
+            t = SceneImageTower(cfg.scene)
+            trunk = nn.Sequential(t.stem, t.layer1, t.down, t.layer2, t.final)
+            with torch.no_grad():
+                _, c, h, w = trunk(torch.zeros(1, 3, cfg.image_size, cfg.image_size)).shape
+            heat = nn.Sequential(nn.Conv2d(c, 64, 1), nn.ReLU(), nn.Conv2d(64, cfg.keypoints, 1))
+            self.net, self.out_dim = nn.Sequential(trunk, heat, SpatialSoftmax(h, w)), 3 * cfg.keypoints
+        self.register_buffer("mean", torch.tensor(mean).view(1, 3, 1, 1))
+        self.register_buffer("std", torch.tensor(std).view(1, 3, 1, 1))
+
+    def forward(self, images: torch.Tensor) -> torch.Tensor:
+        return self.net((images.float() / 255.0 - self.mean) / self.std)
+
+    def load_scene_trunk(self, vlm) -> None:
+        """Start the scene tower from a scene VLM's image trunk (its pretrained weights)."""
+        v = vlm.visual
+        self.net[0].load_state_dict(nn.Sequential(v.stem, v.layer1, v.down, v.layer2, v.final).state_dict())
+
+
+class DistilledPolicy(nn.Module):
+    """Frames and a condition (text embeddings, primitive codes, or None) to actions."""
+
+    def __init__(self, cfg: PolicyConfig, pretrained: bool = False):
+        super().__init__()
+        self.cfg = cfg
+        self.encoder = ImageEncoder(cfg, pretrained)
+        f, h, a = self.encoder.out_dim, cfg.hidden, cfg.action_dim
+        if cfg.conditioning == "none":
+            self.head = nn.Sequential(nn.Linear(f, h), nn.ReLU(), nn.Linear(h, a))
+        else:
+            self.image_fc = nn.Sequential(nn.Linear(f, h), nn.ReLU())
+            width = cfg.text_dim if cfg.conditioning == "language" else len(cfg.goals)
+            self.condition_fc = nn.Sequential(nn.Linear(width, h), nn.ReLU())
+            self.head = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU(), nn.Linear(h, a))
+        self.register_buffer("goal_embeddings", torch.zeros(len(cfg.goals), cfg.text_dim))
+
+    def forward(self, images: torch.Tensor, condition: torch.Tensor | None = None) -> torch.Tensor:
+        z = self.encoder(images)
+        if self.cfg.conditioning == "none":
+            return self.head(z)
+        if self.cfg.conditioning == "primitive":
+            condition = F.one_hot(condition.long(), len(self.cfg.goals)).float()
+        return self.head(torch.cat([self.image_fc(z), self.condition_fc(condition)], dim=1))
+
+    def nearest_codes(self, embeddings: torch.Tensor) -> torch.Tensor:
+        """The primitive code of each goal embedding: the training task nearest in L2 distance."""
+        return torch.cdist(embeddings.float(), self.goal_embeddings).argmin(dim=1)
+
+    def condition(self, embeddings: torch.Tensor) -> torch.Tensor | None:
+        """What :meth:`forward` reads for goals given by their text embeddings (N, text_dim)."""
+        if self.cfg.conditioning == "language":
+            return embeddings.float()
+        return self.nearest_codes(embeddings) if self.cfg.conditioning == "primitive" else None
+
+    @torch.no_grad()
+    def act(self, frames, embeddings: torch.Tensor) -> "torch.Tensor":
+        """Actions in [-1, 1] for camera frames (N, H, W, 3) uint8 and their goals' embeddings."""
+        images = torch.as_tensor(frames).permute(0, 3, 1, 2)
+        return self(images, self.condition(embeddings)).clamp(-1.0, 1.0)
+
+
+def embed_goals(vlm, goals, kind: str = "language") -> torch.Tensor:
+    """Goal sentences' text embeddings (M, D). ``language``: the VLM's language encoder as it
+    is (the paper feeds CLIP's language encoding; for the scene VLM, its frozen sentence encoder,
+    before the projection that pretraining on presence-only captions taught to ignore
+    relation words); ``joint``: the normalised embedding in the image-text space."""
+    with torch.no_grad():
+        if kind == "language" and hasattr(vlm, "sentence_features"):
+            return vlm.sentence_features(list(goals)).float().cpu()
+        return vlm.encode_texts(list(goals), normalize=True).float().cpu()
+
+
+def save_policy(policy: DistilledPolicy, folder: str | Path, training: dict | None = None) -> None:
+    save_folder(folder, {"kind": KIND, "config": asdict(policy.cfg), "training": training or {}},
+                {WEIGHTS_FILE: policy})
+
+
+def load_policy(folder: str | Path) -> DistilledPolicy:
+    """A saved distilled policy: its config checked against :class:`PolicyConfig` and its
+    weights' names, shapes and dtypes against the policy that describes, before loading."""
+    config = read_config(folder, kind=KIND, schema={"kind": str, "config": PolicyConfig, "training": dict})
+    policy = build_model(folder, lambda: DistilledPolicy(config.config))
+    load_weights(policy, folder)
+    return policy.eval()

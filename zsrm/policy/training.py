@@ -1,0 +1,214 @@
+"""``zsrm distill``: behaviour cloning of the three multi-task policies (paper 2.3, 3.3).
+
+L2 loss on the task policies' continuous actions, Adam with AMSGrad at 1e-4, each frame
+augmented by RandomResizedCrop (area 0.95-1.0, aspect 0.98-1.02) back to its own size. Two
+schedules: ``paper`` (ResNet18, ImageNet weights when the user has them, 300 epochs) and
+``cpu`` (the scene VLM's image trunk at the policies' render size, pretrained on renders of
+all four colours in the role ImageNet plays in the paper, 10 epochs). Each policy is written
+to ``OUT/<conditioning>/`` (safetensors + JSON) with its per-epoch losses; a checkpoint after
+each epoch lets a killed run resume, and a finished policy is skipped.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from zsrm.policy.models import DistilledPolicy, PolicyConfig, embed_goals, load_policy, save_policy
+from zsrm.policy.rollouts import RolloutData
+from zsrm.vlm.files import read_json, write_json
+from zsrm.vlm.optim import load_optimizer, read_checkpoint_state, save_checkpoint
+from zsrm.vlm.registry import load_weights
+
+SCHEDULES = {"cpu": {"tower": "scene", "epochs": 10}, "paper": {"tower": "resnet18", "epochs": 300}}
+
+
+@dataclass
+class DistillConfig:
+    schedule: Literal["cpu", "paper"] = "cpu"
+    """cpu: the scene VLM's image trunk, 10 epochs; paper: ResNet18, 300 epochs"""
+    tower: Literal["scene", "resnet18"] | None = None
+    """image tower (default: the schedule's)"""
+    epochs: int | None = None
+    """epochs over the rollouts (default: the schedule's)"""
+    policies: tuple[str, ...] = ("language", "primitive", "none")
+    """which of the three policies to train"""
+    pretrained: bool = True
+    """start the tower from pretrained weights (scene: the VLM's trunk; resnet18: ImageNet)"""
+    vlm: str = "scene"
+    """the VLM whose text tower embeds the goals (and whose image trunk the scene tower starts from)"""
+    text_embedding: Literal["language", "joint"] = "language"
+    """goal embedding: the language encoder's own (as the paper feeds CLIP's) or the image-text space's"""
+    batch_size: int = 64
+    """frames per step"""
+    lr: float = 1e-4
+    """Adam (AMSGrad) learning rate"""
+    seed: int = 0
+    """seed of the initialisation, the shuffling and the crops"""
+    threads: int = 2
+    """torch threads"""
+
+    def __post_init__(self):
+        if self.schedule not in SCHEDULES:
+            raise ValueError(f"unknown schedule {self.schedule!r}; choose cpu or paper")
+        self.tower = self.tower or SCHEDULES[self.schedule]["tower"]
+        self.epochs = int(self.epochs or SCHEDULES[self.schedule]["epochs"])
+        unknown = set(self.policies) - {"language", "primitive", "none"}
+        if unknown or not self.policies:
+            raise ValueError(f"policies must be of language, primitive, none; got {', '.join(self.policies)}")
+        if min(self.epochs, self.batch_size, self.threads) < 1:
+            raise ValueError("epochs, batch_size and threads must be >= 1")
+
+
+def random_crops(images: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    """RandomResizedCrop (area 0.95-1.0, aspect 0.98-1.02) of each frame, back to its size."""
+    from zsrm.vlm.compat import import_torchvision
+
+    import_torchvision()
+    from torchvision.transforms.v2 import functional as TF
+
+    n, _, h, w = images.shape
+    area = h * w * (0.95 + 0.05 * torch.rand(n, generator=generator))
+    ratio = torch.exp(np.log(0.98) + (np.log(1.02) - np.log(0.98)) * torch.rand(n, generator=generator))
+    ch = torch.sqrt(area / ratio).round().clamp(1, h).long()
+    cw = torch.sqrt(area * ratio).round().clamp(1, w).long()
+    out = []
+    for i in range(n):
+        top = int(torch.randint(0, h - int(ch[i]) + 1, (1,), generator=generator))
+        left = int(torch.randint(0, w - int(cw[i]) + 1, (1,), generator=generator))
+        out.append(TF.resized_crop(images[i], top, left, int(ch[i]), int(cw[i]), [h, w], antialias=True))
+    return torch.stack(out)
+
+
+@dataclass
+class CloningData:
+    """The rollouts as tensors: frames (N, 3, H, W) uint8, actions (N, A), each frame's primitive
+    code (its task's position in ``goals``) and the goals' text embeddings (T, D)."""
+
+    images: torch.Tensor
+    actions: torch.Tensor
+    codes: torch.Tensor
+    goals: list[str]
+    embeddings: torch.Tensor
+    camera: str
+    action_repeat: int
+
+    def condition(self, conditioning: str, index: torch.Tensor) -> torch.Tensor | None:
+        if conditioning == "language":
+            return self.embeddings[self.codes[index]]
+        return self.codes[index] if conditioning == "primitive" else None
+
+
+def cloning_data(data: RolloutData, vlm, text_embedding: str) -> CloningData:
+    arrays = data.load()
+    lookup = np.full(int(arrays["task"].max()) + 1, -1, np.int64)
+    lookup[[int(info["task"]) for info in data.infos]] = np.arange(len(data.infos))
+    return CloningData(images=torch.from_numpy(arrays["frames"]).permute(0, 3, 1, 2).contiguous(),
+                       actions=torch.from_numpy(arrays["actions"]).float(),
+                       codes=torch.from_numpy(lookup[arrays["task"]]), goals=data.goals,
+                       embeddings=embed_goals(vlm, data.goals, text_embedding), camera=data.setting("camera"),
+                       action_repeat=int(data.setting("action_repeat")))
+
+
+def build_policy(cfg: DistillConfig, conditioning: str, data: CloningData, vlm) -> DistilledPolicy:
+    """A fresh policy for the rollouts, its tower started as ``cfg`` says."""
+    if cfg.tower == "scene" and not hasattr(vlm, "visual"):
+        raise ValueError(f"--tower scene starts from a scene VLM's image trunk; {cfg.vlm!r} is not one")
+    pcfg = PolicyConfig(conditioning=conditioning, tower=cfg.tower, image_size=int(data.images.shape[-1]),
+                        action_dim=int(data.actions.shape[1]), text_dim=int(data.embeddings.shape[1]),
+                        goals=tuple(data.goals), scene=vlm.config if cfg.tower == "scene" else None, vlm=cfg.vlm,
+                        text_embedding=cfg.text_embedding, camera=data.camera, action_repeat=data.action_repeat)
+    torch.manual_seed(cfg.seed)
+    policy = DistilledPolicy(pcfg, pretrained=cfg.pretrained and cfg.tower == "resnet18")
+    if cfg.tower == "scene" and cfg.pretrained:
+        policy.encoder.load_scene_trunk(vlm)
+    policy.goal_embeddings.copy_(data.embeddings)
+    return policy
+
+
+def run_epoch(policy: DistilledPolicy, opt, data: CloningData, cfg: DistillConfig, epoch: int) -> float:
+    """One pass over the shuffled frames; the mean L2 (MSE) loss."""
+    generator = torch.Generator().manual_seed(cfg.seed * 100_003 + epoch)
+    n = len(data.actions)
+    order, total = torch.randperm(n, generator=generator), 0.0
+    policy.train()
+    for start in range(0, n, cfg.batch_size):
+        index = order[start:start + cfg.batch_size]
+        pred = policy(random_crops(data.images[index], generator), data.condition(policy.cfg.conditioning, index))
+        loss = F.mse_loss(pred, data.actions[index])
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        total += loss.item() * len(index)
+    policy.eval()
+    return total / n
+
+
+def identity(cfg: DistillConfig, conditioning: str, data: CloningData) -> dict:
+    """The settings that define one policy's training (a checkpoint resumes only under them)."""
+    d = {**asdict(cfg), "conditioning": conditioning, "frames": len(data.actions), "goals": data.goals}
+    for k in ("policies", "threads"):
+        d.pop(k)
+    return json.loads(json.dumps(d))
+
+
+def train_policy(cfg: DistillConfig, conditioning: str, data: CloningData, vlm, folder: Path,
+                 progress: bool = True, fresh: bool = False) -> dict:
+    """Train (or resume, or skip when finished) one policy into ``folder``; its training record."""
+    from tqdm import tqdm
+
+    ident = identity(cfg, conditioning, data)
+    if not fresh and (folder / "config.json").is_file():
+        training = read_json(folder / "config.json").get("training", {})
+        if training.get("config") == ident:
+            return training
+    policy = build_policy(cfg, conditioning, data, vlm)
+    opt = torch.optim.Adam(policy.parameters(), lr=cfg.lr, amsgrad=True)
+    ckpt, start, log = folder / "checkpoint", 0, []
+    if not fresh and (ckpt / "state.json").is_file():
+        state = read_checkpoint_state(ckpt, ident, {"epoch": int, "log": list})
+        load_weights(policy, ckpt)
+        load_optimizer(ckpt, opt)
+        start, log = state["epoch"], state["log"]
+    with tqdm(total=cfg.epochs, initial=start, unit="epoch", desc=f"distill {conditioning}",
+              disable=not progress) as bar:
+        for epoch in range(start, cfg.epochs):
+            log.append({"epoch": epoch + 1, "loss": run_epoch(policy, opt, data, cfg, epoch)})
+            save_checkpoint(ckpt, lambda tmp: save_policy(policy, tmp), opt,
+                            {"config": ident, "epoch": epoch + 1, "log": log})
+            bar.update(1)
+            bar.set_postfix(loss=f"{log[-1]['loss']:.4f}")
+    training = {"config": ident, "log": log, "final_loss": log[-1]["loss"] if log else None}
+    save_policy(policy, folder, training)
+    return training
+
+
+def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progress: bool = True,
+            fresh: bool = False) -> dict:
+    """Behaviour cloning of ``cfg.policies`` on the rollouts in ``data_folder``, each into
+    ``out/<conditioning>/``; writes and returns ``out/distill.json``."""
+    from zsrm.vlm import load_vlm
+
+    torch.set_num_threads(cfg.threads)
+    vlm = load_vlm(cfg.vlm)
+    data = cloning_data(RolloutData(data_folder), vlm, cfg.text_embedding)
+    policies = {name: train_policy(cfg, name, data, vlm, Path(out) / name, progress, fresh)
+                for name in cfg.policies}
+    summary = {"schedule": cfg.schedule, "tower": cfg.tower, "pretrained": cfg.pretrained, "epochs": cfg.epochs,
+               "vlm": cfg.vlm, "text_embedding": cfg.text_embedding, "data": str(data_folder),
+               "frames": len(data.actions), "goals": data.goals,
+               "policies": {name: {"folder": name, "final_loss": t["final_loss"]}
+                            for name, t in policies.items()}}
+    write_json(Path(out) / "distill.json", summary)
+    return summary
+
+
+def load_distilled(out: str | Path) -> tuple[dict, dict[str, DistilledPolicy]]:
+    """``out/distill.json`` and the policies it lists."""
+    summary = read_json(Path(out) / "distill.json", "the summary of zsrm distill")
+    return summary, {name: load_policy(Path(out) / name) for name in summary.get("policies", {})}
