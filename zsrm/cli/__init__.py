@@ -14,7 +14,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from zsrm.cli.options import add_command, from_namespace  # noqa: E402
-from zsrm.pipeline import build, demo, goals, learn, measure, reproduce  # noqa: E402
+from zsrm.pipeline import build, demo, distill, goals, learn, measure, reproduce  # noqa: E402
 
 COMMANDS = {
     "parse-goal": goals.ParseGoal,
@@ -36,6 +36,10 @@ COMMANDS = {
     "rollout": learn.Rollout,
     "sweep": learn.Sweep,
     "plot": learn.Plot,
+    "multitask-policies": distill.MultitaskPolicies,
+    "multitask-rollouts": distill.MultitaskRollouts,
+    "distill": distill.Distill,
+    "eval-multitask": distill.EvalMultitask,
     "reproduce": reproduce.Reproduce,
 }
 

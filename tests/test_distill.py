@@ -1,0 +1,162 @@
+"""The multi-task policy (paper 2.3, 3.3, Table 2): rollout data without blue, the nearest
+primitive code, the three policies, and a tiny end to end run of the four commands."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from zsrm.pipeline.distill import Distill, EvalMultitask, MultitaskRollouts, train_goals
+from zsrm.policy.models import DistilledPolicy, PolicyConfig, embed_goals, load_policy, resnet18, save_policy
+from zsrm.policy.rollouts import RolloutData, policy_folder, train_task_index
+from zsrm.policy.training import random_crops
+from zsrm.rl import TrainConfig, train
+from zsrm.rl.envs import make_vec
+from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
+from zsrm.tasks.language import parse_goal
+from zsrm.vlm.scene import SceneConfig
+
+TINY = dict(steps=256, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, eval_every=128,
+            checkpoint_every=128, keypoints=4)
+# One stack and one place-right task (TRAIN_TASKS order: on top of, left of, right of x 6 pairs).
+GOALS = [TRAIN_TASKS[0].text, TRAIN_TASKS[12].text]
+SMALL_SCENE = SceneConfig(widths=(8, 8, 8), groups=4)
+
+
+def blue_pixels(frames: np.ndarray) -> np.ndarray:
+    """Pixels of the blue block's colour (rgba 0.12 0.25 0.9 as the scene renders it lit):
+    strongly blue, well above red and green (the grey-blue walls are not)."""
+    f = frames.astype(np.int16)
+    r, g, b = f[..., 0], f[..., 1], f[..., 2]
+    return (b > 100) & (b - r > 60) & (b - g > 40)
+
+
+@pytest.fixture(scope="module")
+def pipeline(tmp_path_factory):
+    """Two tiny zsrm-trained task policies, 2 rollouts each, 1 epoch of distillation, a tiny table."""
+    root = tmp_path_factory.mktemp("multitask")
+    for goal in GOALS:
+        train(TrainConfig(goal=goal, reward="zsrm", seed=0, **TINY), policy_folder(root / "policies", goal).parent,
+              progress=False)
+    assert MultitaskRollouts(tasks=tuple(GOALS), policies=str(root / "policies"), episodes=2, envs=2,
+                             out=str(root / "rollouts")).run() == 0
+    assert Distill(epochs=1, threads=1, data=str(root / "rollouts"), out=str(root / "distill")).run() == 0
+    assert EvalMultitask(policies=str(root / "distill"), data=str(root / "rollouts"), seeds=2, tasks=2,
+                         threads=1, out=str(root / "table2.json")).run() == 0
+    return root
+
+
+def test_blue_never_appears_in_the_distillation_data(pipeline):
+    data = RolloutData(pipeline / "rollouts")
+    arrays = data.load()
+    texts = list(data.goals) + [str(g) for g in arrays["goal"]] + list(data.manifest["config"]["tasks"])
+    assert texts and not any("blue" in t.lower() for t in texts)
+    assert sorted(set(arrays["task"].tolist())) == [0, 12] and len(arrays["frames"]) == len(arrays["actions"])
+    assert arrays["frames"].shape[1:] == (64, 64, 3) and arrays["frames"].dtype == np.uint8
+    assert not blue_pixels(arrays["frames"]).any()
+    # The detector does find the blue block where one is shown: a test task's first frame.
+    venv = make_vec(TrainConfig(goal=TEST_TASKS[0].text), 1, 0)
+    assert blue_pixels(venv.reset()["front"]).sum() > 10
+    venv.close()
+
+
+def test_the_collection_scenes_show_the_tasks_two_blocks_only():
+    for goal in GOALS:
+        venv = make_vec(TrainConfig(goal=goal), 1, 0)
+        env = venv.envs[0].unwrapped
+        assert set(env.objects) == set(parse_goal(goal).objects) and "blue" not in env.objects
+        assert not blue_pixels(venv.reset()["front"]).any()
+        venv.close()
+
+
+def test_test_tasks_are_refused_as_distillation_data():
+    with pytest.raises(ValueError, match="not one of the 18 training tasks"):
+        train_task_index(TEST_TASKS[0].text)
+    with pytest.raises(ValueError):
+        train_goals(("a blue block on top of a red block",))
+    assert train_goals(("put the red block onto the green one",)) == [TRAIN_TASKS[0].text]
+
+
+def test_nearest_primitive_code_keeps_the_relation():
+    from zsrm.vlm import load_vlm
+
+    vlm = load_vlm("scene")
+    goals = tuple(t.text for t in TRAIN_TASKS)
+    cfg = PolicyConfig(conditioning="primitive", tower="scene", image_size=64, action_dim=3, text_dim=384,
+                       goals=goals, scene=SMALL_SCENE, hidden=8, keypoints=2)
+    policy = DistilledPolicy(cfg)
+    policy.goal_embeddings.copy_(embed_goals(vlm, goals))
+    tests = [t.text for t in TEST_TASKS]
+    nearest = [TRAIN_TASKS[int(c)] for c in policy.nearest_codes(embed_goals(vlm, tests))]
+    # Every test goal maps to a training task of its own relation that shares its training colour.
+    for test, train_task in zip(TEST_TASKS, nearest):
+        assert train_task.relation == test.relation
+        assert set(test.objects) - {"blue"} <= set(train_task.objects), (test.text, train_task.text)
+    # The paper's example: "a blue block on the right of a yellow block" maps to a right-of task with
+    # yellow (here "a yellow block on the right of a green block"; the paper's CLIP gave red right of yellow).
+    mapped = nearest[tests.index("a blue block on the right of a yellow block")]
+    assert mapped.relation == "right_of" and "yellow" in mapped.objects
+    # Training goals map to themselves.
+    assert policy.nearest_codes(policy.goal_embeddings).tolist() == list(range(18))
+
+
+@pytest.mark.parametrize("tower", ["scene", "resnet18"])
+@pytest.mark.parametrize("conditioning", ["language", "primitive", "none"])
+def test_the_three_policies_give_one_action_per_frame(tmp_path, tower, conditioning):
+    cfg = PolicyConfig(conditioning=conditioning, tower=tower, image_size=64, action_dim=3, text_dim=6,
+                       goals=("a red block on top of a green block", "a green block on top of a red block"),
+                       scene=SMALL_SCENE if tower == "scene" else None, hidden=16, keypoints=4)
+    policy = DistilledPolicy(cfg).eval()
+    frames = np.random.default_rng(0).integers(0, 255, (5, 64, 64, 3), dtype=np.uint8)
+    embeddings = torch.randn(5, 6)
+    actions = policy.act(frames, embeddings)
+    assert tuple(actions.shape) == (5, 3) and actions.abs().max() <= 1
+    save_policy(policy, tmp_path)
+    assert torch.equal(load_policy(tmp_path).act(frames, embeddings), actions)
+    assert json.loads((tmp_path / "config.json").read_text())["config"]["conditioning"] == conditioning
+
+
+def test_random_crops_keep_the_size():
+    images = torch.randint(0, 255, (4, 3, 64, 64), dtype=torch.uint8)
+    out = random_crops(images, torch.Generator().manual_seed(0))
+    assert out.shape == images.shape and out.dtype == torch.uint8
+
+
+def test_resnet18_imagenet_weights_offline_is_one_clear_line():
+    hub = Path(torch.hub.get_dir()) / "checkpoints" / "resnet18-f37072fd.pth"
+    if hub.is_file():
+        pytest.skip("ResNet18's ImageNet weights are cached on this machine")
+    with pytest.raises(ValueError, match="--tower scene"):
+        resnet18(pretrained=True)
+
+
+def test_tiny_end_to_end_writes_table2(pipeline):
+    table = json.loads((pipeline / "table2.json").read_text())
+    for policy in ("language", "primitive", "none"):
+        for spread in ("seen", "unseen"):
+            for split in ("train", "test"):
+                cell = table[policy][spread][split]
+                assert 0 <= cell["mean"] <= 100 and cell["se"] >= 0 and cell["episodes"] == 4
+    assert table["schedule"] == "cpu" and table["tower"] == "scene"
+    assert table["oracle_task_policies"]["episodes"] == 4 and 0 <= table["oracle_task_policies"]["mean"] <= 100
+    assert set(table["meta"]["primitive_mapping_test"].values()) <= set(GOALS)
+    md = (pipeline / "table2.md").read_text()
+    assert "Language Cond." in md and "Primitive Code Cond." in md and "No Conditioning" in md
+    assert (pipeline / "table2.png").read_bytes()[:4] == b"\x89PNG"
+    summary = json.loads((pipeline / "distill" / "distill.json").read_text())
+    assert summary["epochs"] == 1 and summary["goals"] == GOALS
+    # A second distill finds the policies finished and leaves them as they are.
+    weights = pipeline / "distill" / "language" / "model.safetensors"
+    mtime = weights.stat().st_mtime_ns
+    assert Distill(epochs=1, threads=1, data=str(pipeline / "rollouts"), out=str(pipeline / "distill")).run() == 0
+    assert weights.stat().st_mtime_ns == mtime
+
+
+def test_docstring_examples():
+    import doctest
+
+    import zsrm.policy.models
+
+    result = doctest.testmod(zsrm.policy.models)
+    assert result.attempted > 0 and result.failed == 0

@@ -1,0 +1,122 @@
+"""Table 2 of the paper: the distilled policies on the 18 training and 18 test tasks.
+
+Each policy runs ``seeds`` seeded episodes per task, on scenes with the seen start-state
+spread (one block width, as the task policies were trained and rolled out) and the unseen
+one (two), and is scored with the oracle episode reward (control steps of 100 in the goal
+relation). Per policy, spread and split: the mean and standard error over all the split's
+episodes. The ceiling, ``oracle_task_policies``, is the task policies' own oracle episode
+reward over the rollouts the policies were distilled from.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from zsrm.envs.rollout import run_vec_episodes
+from zsrm.evaluation.plots import pyplot, save_figure
+from zsrm.policy.models import DistilledPolicy, embed_goals
+from zsrm.rl.config import TrainConfig
+from zsrm.rl.envs import make_vec
+from zsrm.rl.evaluate import mean_se
+from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
+from zsrm.vlm.files import write_json, write_text
+
+EVAL_SEED = 3_000_000  # evaluation scenes: seeds apart from the training and collection envs'
+POLICY_NAMES = {"none": "No Conditioning", "primitive": "Primitive Code Cond.", "language": "Language Cond."}
+SPREADS = ("seen", "unseen")
+SPLITS = ("train", "test")
+
+
+def task_rewards(policy: DistilledPolicy, goal: str, embedding: torch.Tensor, seeds: int, spread: str,
+                 task_seed: int) -> list[float]:
+    """Oracle episode rewards of ``seeds`` seeded episodes of one goal."""
+    cfg = TrainConfig(goal=goal, image_size=policy.cfg.image_size, action_repeat=policy.cfg.action_repeat)
+    venv = make_vec(cfg, seeds, task_seed, spread)
+    camera = policy.cfg.camera
+    if camera not in venv.observation_space.spaces:
+        venv.close()
+        raise ValueError(f"the policy reads camera {camera!r}; the scenes of {goal!r} show "
+                         f"{', '.join(venv.observation_space.spaces)}")
+    embeddings = embedding.expand(seeds, -1)
+    try:
+        return run_vec_episodes(venv, lambda obs: policy.act(obs[camera], embeddings).numpy())["episode_rewards"]
+    finally:
+        venv.close()
+
+
+def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[str, list[str]], seeds: int,
+                      spreads=SPREADS, progress: bool = True) -> dict:
+    """``<policy>.<spread>.<split>.{mean, se, episodes}`` and the per-task means."""
+    from tqdm import tqdm
+
+    out: dict = {}
+    runs = [(n, s, sp) for n in policies for s in spreads for sp in splits]
+    for name, spread, split in tqdm(runs, desc="eval-multitask", disable=not progress):
+        policy, goals = policies[name], splits[split]
+        embeddings = embed_goals(vlm, goals, policy.cfg.text_embedding)
+        per_task = [task_rewards(policy, goal, embeddings[i:i + 1], seeds, spread, EVAL_SEED + 1000 * i)
+                    for i, goal in enumerate(goals)]
+        mean, se = mean_se([r for rewards in per_task for r in rewards])
+        out.setdefault(name, {}).setdefault(spread, {})[split] = {
+            "mean": mean, "se": se, "episodes": sum(map(len, per_task)),
+            "per_task": {goal: float(np.mean(r)) for goal, r in zip(goals, per_task)}}
+    return out
+
+
+def primitive_mapping(policy: DistilledPolicy, vlm, goals: list[str]) -> dict[str, str]:
+    """Each goal's nearest training task (the primitive code the primitive policy is given)."""
+    codes = policy.nearest_codes(embed_goals(vlm, goals, policy.cfg.text_embedding))
+    return {goal: policy.cfg.goals[int(c)] for goal, c in zip(goals, codes)}
+
+
+def split_goals(max_tasks: int | None = None) -> dict[str, list[str]]:
+    """The 18 training and 18 test tasks' goal sentences (the first ``max_tasks`` of each)."""
+    return {"train": [t.text for t in TRAIN_TASKS][:max_tasks], "test": [t.text for t in TEST_TASKS][:max_tasks]}
+
+
+def table_markdown(table: dict) -> str:
+    """Table 2 as markdown: mean and s.e. per policy, spread and split."""
+    head = "| (oracle episode reward) | " + " | ".join(
+        f"{spread} {split} mean | s.e." for spread in SPREADS for split in SPLITS) + " |"
+    lines = [head, "|---" * (1 + 2 * len(SPREADS) * len(SPLITS)) + "|"]
+    for name in ("none", "primitive", "language"):
+        if name in table:
+            cells = [f"{table[name][s][p]['mean']:.2f} | {table[name][s][p]['se']:.2f}"
+                     for s in SPREADS for p in SPLITS]
+            lines.append(f"| {POLICY_NAMES[name]} | " + " | ".join(cells) + " |")
+    oracle = table["oracle_task_policies"]
+    lines += ["", f"Schedule `{table['schedule']}`, image tower `{table['tower']}`; {table['meta']['seeds']} seeds "
+              f"per task, {table['meta']['tasks_per_split']} tasks per split. The 18 zsrm-trained task policies "
+              f"themselves (seen spread, the distillation rollouts): {oracle['mean']:.2f} +- {oracle['se']:.2f}."]
+    return "\n".join(lines) + "\n"
+
+
+def plot_table(table: dict, path: str | Path) -> Path:
+    """Bars of the mean (s.e. whiskers) per spread and split, one colour per policy; the task
+    policies' own mean as a dashed line."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 3.6))
+    groups = [(s, p) for s in SPREADS for p in SPLITS]
+    names = [n for n in ("none", "primitive", "language") if n in table]
+    width = 0.8 / max(1, len(names))
+    for k, name in enumerate(names):
+        x = np.arange(len(groups)) + (k - (len(names) - 1) / 2) * width
+        ax.bar(x, [table[name][s][p]["mean"] for s, p in groups], width,
+               yerr=[table[name][s][p]["se"] for s, p in groups], capsize=3, label=POLICY_NAMES[name])
+    ax.axhline(table["oracle_task_policies"]["mean"], color="k", linestyle="--", linewidth=1,
+               label="task policies (seen)")
+    ax.set_xticks(np.arange(len(groups)), [f"{s}\n{p} tasks" for s, p in groups])
+    ax.set_ylabel("oracle episode reward (of 100)")
+    ax.set_title(f"Table 2: multi-task policies ({table['schedule']} schedule, {table['tower']} tower)")
+    ax.legend(fontsize=8)
+    ax.grid(axis="y", alpha=0.3)
+    return save_figure(fig, path)
+
+
+def write_table(table: dict, path: str | Path) -> list[Path]:
+    """``path`` (JSON), the markdown and the plot beside it (``.md``, ``.png``)."""
+    path = Path(path)
+    return [write_json(path, table), write_text(path.with_suffix(".md"), table_markdown(table)),
+            plot_table(table, path.with_suffix(".png"))]

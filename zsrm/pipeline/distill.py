@@ -1,0 +1,145 @@
+"""Stages of the multi-task policy (paper 2.3, 3.3, Table 2), run in this order:
+
+1. ``zsrm multitask-policies``: the 18 training tasks' policies, zsrm reward, one Ray sweep;
+2. ``zsrm multitask-rollouts``: 50 rollouts of each, with the goal text (no blue anywhere);
+3. ``zsrm distill``: behaviour cloning of the language, primitive-code and unconditioned policies;
+4. ``zsrm eval-multitask``: Table 2 (JSON, markdown, bar plot).
+"""
+from __future__ import annotations
+
+import os
+import platform
+from dataclasses import dataclass
+
+from zsrm.pipeline import narrow
+from zsrm.pipeline.learn import Sweep
+from zsrm.policy.training import DistillConfig
+from zsrm.tasks.catalogue import TRAIN_TASKS
+from zsrm.vlm.files import check_writable
+
+POLICIES_ROOT = "runs/multitask/policies"
+ROLLOUTS = "data/multitask/rollouts"
+DISTILLED = "runs/multitask/distill"
+
+
+def train_goals(tasks: tuple[str, ...] = ()) -> list[str]:
+    """The named training tasks' canonical sentences in TRAIN_TASKS order (all 18 when none)."""
+    from zsrm.policy.rollouts import train_task_index
+
+    indices = sorted({train_task_index(t) for t in tasks}) if tasks else range(len(TRAIN_TASKS))
+    return [TRAIN_TASKS[i].text for i in indices]
+
+
+@dataclass
+class MultitaskPolicies:
+    """Train the 18 training tasks' policies with the zsrm reward as one Ray sweep (resumable)."""
+
+    tasks: tuple[str, ...] = ()  # training tasks (goal sentences) to train; default: all 18
+    seed: int = 0  # the policies' seed
+    steps: int = 200_000  # env steps per task (the paper's 200k)
+    root: str = POLICIES_ROOT  # one run folder per task under here
+    num_cpus: int = 2  # CPUs of the local Ray (one trial per CPU)
+    address: str | None = None  # a Ray cluster to join instead (auto, or ray://HOST:PORT)
+    reward_model: str = "student"  # the zsrm reward's model folder, or student (the shipped one)
+    out: str = "results/multitask/policies.json"  # the gathered summary (trials kept beside it in trials/)
+
+    def run(self) -> int:
+        return Sweep(tasks=tuple(train_goals(self.tasks)), rewards=("zsrm",), seeds=(self.seed,), root=self.root,
+                     steps=self.steps, num_cpus=self.num_cpus, address=self.address,
+                     reward_model=self.reward_model, out=self.out).run()
+
+
+@dataclass
+class MultitaskRollouts:
+    """Roll out each training task's policy (seeded episodes, goal text kept): the distillation data."""
+
+    tasks: tuple[str, ...] = ()  # training tasks (goal sentences); default: all 18
+    policies: str = POLICIES_ROOT  # root of the task policies' run folders (zsrm multitask-policies)
+    seed: int = 0  # the task policies' seed (their folder names)
+    episodes: int = 50  # episodes of 100 control steps per task
+    envs: int = 10  # episodes stepped together
+    out: str = ROLLOUTS  # dataset folder (shards + manifest; resumes)
+
+    def run(self) -> int:
+        from zsrm.policy.rollouts import RolloutConfig, collect_rollouts, policy_folder
+
+        goals = train_goals(self.tasks)
+        folders = [str(policy_folder(self.policies, g, self.seed)) for g in goals]
+        missing = [f for f in folders if not os.path.isdir(f)]
+        if missing:
+            raise FileNotFoundError(f"no task policy in {missing[0]} ({len(missing)} of {len(folders)} missing); "
+                                    "run zsrm multitask-policies first")
+        data = collect_rollouts(RolloutConfig(tuple(goals), tuple(folders), self.episodes, self.envs), self.out)
+        rewards = data.episode_rewards
+        print(f"{len(goals)} tasks, {len(rewards)} episodes; task policies' oracle episode reward "
+              f"{sum(rewards) / len(rewards):.1f}")
+        print(f"wrote {self.out}/")
+        return 0
+
+
+@dataclass
+class Distill(DistillConfig):
+    """Behaviour cloning of the language-conditioned, primitive-code and unconditioned policies."""
+
+    data: str = ROLLOUTS  # rollouts written by zsrm multitask-rollouts
+    out: str = DISTILLED  # one folder per policy under here, and distill.json
+    fresh: bool = False  # start over instead of resuming or skipping finished policies
+
+    def run(self) -> int:
+        from zsrm.policy.training import distill
+
+        check_writable(self.out, folder=True)
+        summary = distill(narrow(self, DistillConfig), self.data, self.out, fresh=self.fresh)
+        for name, p in summary["policies"].items():
+            print(f"{name}: final L2 loss {p['final_loss']:.4f}")
+        print(f"{summary['schedule']} schedule, {summary['tower']} tower, {summary['epochs']} epochs over "
+              f"{summary['frames']} frames of {len(summary['goals'])} tasks; wrote {self.out}/")
+        return 0
+
+
+@dataclass
+class EvalMultitask:
+    """Table 2: the distilled policies on the training and test tasks, seen and unseen start spread."""
+
+    policies: str = DISTILLED  # the folder zsrm distill wrote
+    data: str = ROLLOUTS  # the rollouts distilled from (the task policies' own oracle reward)
+    seeds: int = 50  # seeded episodes per task
+    tasks: int | None = None  # only the first N training and N test tasks (default: all 18 and 18)
+    out: str = "results/table2.json"  # the table; .md and .png beside it
+    threads: int = 2  # torch threads
+
+    def run(self) -> int:
+        import torch
+
+        from zsrm.evaluation.multitask import evaluate_policies, primitive_mapping, split_goals, write_table
+        from zsrm.policy.rollouts import RolloutData
+        from zsrm.policy.training import load_distilled
+        from zsrm.rl.evaluate import mean_se
+        from zsrm.vlm import load_vlm
+
+        check_writable(self.out)
+        torch.set_num_threads(self.threads)
+        summary, policies = load_distilled(self.policies)
+        data, vlm = RolloutData(self.data), load_vlm(summary["vlm"])
+        splits = split_goals(self.tasks)
+        table = evaluate_policies(policies, vlm, splits, self.seeds)
+        mean, se = mean_se(data.episode_rewards)
+        table.update(schedule=summary["schedule"], tower=summary["tower"],
+                     oracle_task_policies={"mean": mean, "se": se, "episodes": len(data.episode_rewards),
+                                           "tasks": len(data.goals)},
+                     meta=self.meta(summary, splits, primitive_mapping(next(iter(policies.values())), vlm,
+                                                                       splits["test"])))
+        for path in write_table(table, self.out):
+            print(f"wrote {path}")
+        return 0
+
+    def meta(self, summary: dict, splits: dict, mapping: dict) -> dict:
+        return {"seeds": self.seeds, "tasks_per_split": len(splits["train"]), "spreads": ["seen", "unseen"],
+                "epochs": summary["epochs"], "pretrained": summary["pretrained"], "vlm": summary["vlm"],
+                "text_embedding": summary["text_embedding"], "distilled_tasks": summary["goals"],
+                "primitive_mapping_test": mapping,
+                "metric": "oracle episode reward: control steps of 100 in the goal relation; mean and s.e. over "
+                          "all episodes of the split (seeds x tasks)",
+                "command": f"zsrm eval-multitask --policies {self.policies} --data {self.data} --seeds {self.seeds}"
+                           + (f" --tasks {self.tasks}" if self.tasks else "") + f" --out {self.out}",
+                "machine": f"{platform.machine()}, {os.cpu_count()} cores"}
