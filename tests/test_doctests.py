@@ -6,7 +6,8 @@ import pytest
 
 MODULES = ["zsrm.tasks.catalogue", "zsrm.tasks.language", "zsrm.envs.rollout", "zsrm.fullmodel", "zsrm.evaluation.metrics",
            "zsrm.evaluation.curves", "zsrm.evaluation.goal_parsing", "zsrm.cli.options", "zsrm.testing.colour_vlm",
-           "zsrm.testing.hostile", "zsrm.testing.synthetic"]
+           "zsrm.testing.hostile", "zsrm.testing.synthetic", "zsrm.rewards.vice", "zsrm.rl.sweep",
+           "zsrm.rl.auxiliary", "zsrm.evaluation.learning_curves"]
 
 
 @pytest.mark.parametrize("name", MODULES)
