@@ -88,8 +88,9 @@ def table_markdown(table: dict) -> str:
             lines.append(f"| {POLICY_NAMES[name]} | " + " | ".join(cells) + " |")
     oracle = table["oracle_task_policies"]
     lines += ["", f"Schedule `{table['schedule']}`, image tower `{table['tower']}`; {table['meta']['seeds']} seeds "
-              f"per task, {table['meta']['tasks_per_split']} tasks per split. The 18 zsrm-trained task policies "
-              f"themselves (seen spread, the distillation rollouts): {oracle['mean']:.2f} +- {oracle['se']:.2f}."]
+              f"per task, {table['meta']['tasks_per_split']} tasks per split. The {oracle['tasks']} zsrm-trained task "
+              f"policies themselves (seen spread, the rollouts distilled from): {oracle['mean']:.2f} +- "
+              f"{oracle['se']:.2f}."]
     return "\n".join(lines) + "\n"
 
 
@@ -107,6 +108,7 @@ def plot_table(table: dict, path: str | Path) -> Path:
                yerr=[table[name][s][p]["se"] for s, p in groups], capsize=3, label=POLICY_NAMES[name])
     ax.axhline(table["oracle_task_policies"]["mean"], color="k", linestyle="--", linewidth=1,
                label="task policies (seen)")
+    ax.set_ylim(0, max(1.0, ax.get_ylim()[1]))
     ax.set_xticks(np.arange(len(groups)), [f"{s}\n{p} tasks" for s, p in groups])
     ax.set_ylabel("oracle episode reward (of 100)")
     ax.set_title(f"Table 2: multi-task policies ({table['schedule']} schedule, {table['tower']} tower)")
