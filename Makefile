@@ -36,6 +36,12 @@ results: setup
 	$(VENV)/bin/zsrm eval-reward --zsrm runs/zsrm/vlm --compare student=runs/zsrm/student --out results/reward_eval.json
 	$(PY) benchmarks/reward_speed.py --vlm runs/zsrm/vlm --student runs/zsrm/student --out results/reward_speed.json
 	OMP_NUM_THREADS=1 $(PY) benchmarks/robustness.py --out results/robustness.json
+	# Table 2 (hours on 2 cores: 18 PPO runs of 200k steps, then rollouts, distillation, 36 x 50 x 2 episodes)
+	$(VENV)/bin/zsrm multitask-policies --steps 200000 --out results/multitask/policies.json
+	$(VENV)/bin/zsrm multitask-rollouts --episodes 50 --out data/multitask/rollouts
+	$(VENV)/bin/zsrm distill --schedule cpu --data data/multitask/rollouts --out runs/multitask/distill
+	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill --data data/multitask/rollouts --seeds 50 \
+		--out results/table2.json
 
 clean:
 	rm -rf reports .pytest_cache
