@@ -146,7 +146,12 @@ def test_tiny_end_to_end_writes_table2(pipeline):
     assert (pipeline / "table2.png").read_bytes()[:4] == b"\x89PNG"
     summary = json.loads((pipeline / "distill" / "distill.json").read_text())
     assert summary["epochs"] == 1 and summary["goals"] == GOALS
-    # A second distill finds the policies finished and leaves them as they are.
+    # A second collection and a second distill find their work finished and leave it as it is.
+    shard = pipeline / "rollouts" / "shard_00000.npz"
+    shard_mtime = shard.stat().st_mtime_ns
+    assert MultitaskRollouts(tasks=tuple(GOALS), policies=str(pipeline / "policies"), episodes=2, envs=2,
+                             out=str(pipeline / "rollouts")).run() == 0
+    assert shard.stat().st_mtime_ns == shard_mtime
     weights = pipeline / "distill" / "language" / "model.safetensors"
     mtime = weights.stat().st_mtime_ns
     assert Distill(epochs=1, threads=1, data=str(pipeline / "rollouts"), out=str(pipeline / "distill")).run() == 0

@@ -23,6 +23,8 @@ The training tasks' text embeddings are kept in the weights (``goal_embeddings``
 """
 from __future__ import annotations
 
+import contextlib
+import io
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
@@ -73,8 +75,9 @@ def resnet18(pretrained: bool) -> nn.Module:
     from zsrm.vlm.compat import import_torchvision
 
     tv = import_torchvision()
-    try:
-        net = tv.models.resnet18(weights="IMAGENET1K_V1" if pretrained else None)
+    try:  # torch.hub announces each download on stdout: the failure below is the one line
+        with contextlib.redirect_stdout(io.StringIO()):
+            net = tv.models.resnet18(weights="IMAGENET1K_V1" if pretrained else None)
     except (OSError, RuntimeError) as err:  # URLError is an OSError
         raise ValueError(f"cannot get ResNet18's ImageNet weights ({str(err).splitlines()[0][:120]}): put "
                          "resnet18-f37072fd.pth in torch's hub cache, pass --no-pretrained, or use --tower scene") \

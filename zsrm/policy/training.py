@@ -211,4 +211,6 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
 def load_distilled(out: str | Path) -> tuple[dict, dict[str, DistilledPolicy]]:
     """``out/distill.json`` and the policies it lists."""
     summary = read_json(Path(out) / "distill.json", "the summary of zsrm distill")
-    return summary, {name: load_policy(Path(out) / name) for name in summary.get("policies", {})}
+    if not isinstance(summary.get("policies"), dict) or not summary["policies"]:
+        raise ValueError(f"{Path(out) / 'distill.json'} lists no policies; rerun zsrm distill")
+    return summary, {name: load_policy(Path(out) / name) for name in summary["policies"]}
