@@ -159,9 +159,9 @@ def run_demo(out: Path, episodes: int = 5) -> Path:
 
 @dataclass
 class Demo:
-    """The offline main job: scenes, episodes and a report folder."""
+    """A tour of the scenes: renders, random episodes, an oracle table, reward curves."""
 
-    out: str = "reports/demo"  # report folder
+    out: str = "reports/scenes"  # report folder (zsrm reproduce writes reports/demo)
     episodes: int = 5  # episodes per task and policy for the table
 
     def run(self) -> int:
