@@ -1,4 +1,4 @@
-"""``zsrm demo``: the offline main job. Writes a report folder with tables and plots.
+"""``zsrm demo``: a tour of the scenes (the main job is ``zsrm reproduce``). Writes a report folder.
 
 It shows the scenes, a random-policy episode per scene, how often the goal holds under a
 random policy and under the true-state scripted controller (the oracle's view), and along
