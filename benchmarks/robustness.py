@@ -18,8 +18,9 @@ ran code from a file (a pickle whose loading would create a marker file; must be
   (finetune, pretrain-vlm, train) and of a data shard;
 * unwritable_output: every command that writes, its output below a regular file and in a
   read-only place;
-* full_disk: every command that writes (but sweep, whose writes happen in Ray workers, plot,
-  which needs a sweep's summary, and reproduce, which runs the commands counted here) with
+* full_disk: every command that writes (but sweep, whose writes happen in Ray workers, plot and
+  the multi-task commands, which need a sweep's results, and reproduce, which runs the commands
+  counted here) with
   each atomic write failing with ENOSPC, and collect and label filling the disk mid-run, then
   rerun to the same data;
 * kill_and_resume: collect, label, finetune, pretrain-vlm and train killed (SIGKILL) after
@@ -232,6 +233,10 @@ def writers(tmp: Path, out: Path, data: Path) -> dict[str, list]:
                   "--out", tmp / f"sweep-{out.name}.json"],
         "plot": ["plot", "--summary", tmp / "learning.json", "--figure6", out / "figure6.png"],
         "reproduce": ["reproduce", "--workdir", out, "--report", tmp / f"report-{out.name}"],
+        "multitask-policies": ["multitask-policies", "--root", out, "--out", tmp / f"policies-{out.name}.json"],
+        "multitask-rollouts": ["multitask-rollouts", "--out", out],
+        "distill": ["distill", "--out", out],
+        "eval-multitask": ["eval-multitask", "--out", out / "table2.json"],
     }
 
 
@@ -240,9 +245,9 @@ def output_cases(tally: Tally, data: Path, tmp: Path) -> None:
         for command, argv in writers(tmp, out, data).items():
             check(tally, "unwritable_output", f"{command}, output {where}", argv, out)
     for command in writers(tmp, tmp, data):
-        if command in ("sweep", "plot", "reproduce"):
-            continue  # sweep's trials write from Ray workers, which this process cannot make full; plot needs
-            # a sweep's summary; reproduce runs the stages counted here one by one
+        if command in ("sweep", "plot", "reproduce") or "multitask" in command or command == "distill":
+            continue  # sweep's trials write from Ray workers, which this process cannot make full; plot and
+            # the multi-task stages need a sweep's results; reproduce runs the stages counted here one by one
         argv = writers(tmp, tmp / "full" / command, data)[command]
         with H.full_disk():
             rc, err = cli(argv)

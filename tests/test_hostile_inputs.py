@@ -203,6 +203,10 @@ def writer_commands(tmp_path, out, dataset) -> dict[str, list[str]]:
         "sweep": ["sweep", "--root", str(out), "--out", str(tmp_path / "sweep.json")],
         "plot": ["plot", "--summary", str(tmp_path / "learning.json"), "--figure6", str(out / "figure6.png")],
         "reproduce": ["reproduce", "--workdir", str(out), "--report", str(tmp_path / "report")],
+        "multitask-policies": ["multitask-policies", "--root", str(out), "--out", str(tmp_path / "p.json")],
+        "multitask-rollouts": ["multitask-rollouts", "--out", str(out)],
+        "distill": ["distill", "--out", str(out)],
+        "eval-multitask": ["eval-multitask", "--out", str(out / "table2.json")],
     }
 
 
@@ -214,7 +218,8 @@ def test_every_writing_command_is_listed():
 
 @pytest.mark.parametrize("command", ["collect", "render", "scripted-eval", "reward-curve", "eval-reward", "label",
                                      "finetune", "eval-grounding", "reward-data", "pretrain-vlm", "eval-vlm",
-                                     "demo", "train", "rollout", "sweep", "plot", "reproduce"])
+                                     "demo", "train", "rollout", "sweep", "plot", "reproduce",
+                                     "multitask-policies", "multitask-rollouts", "distill", "eval-multitask"])
 def test_an_unwritable_output_is_one_line_before_any_work(command, dataset, tmp_path, capsys, monkeypatch):
     def no_work(*args, **kwargs):
         raise AssertionError("work started before the output was checked")

@@ -63,6 +63,7 @@ class MultitaskRollouts:
     def run(self) -> int:
         from zsrm.policy.rollouts import RolloutConfig, collect_rollouts, policy_folder
 
+        check_writable(self.out, folder=True)
         goals = train_goals(self.tasks)
         folders = [str(policy_folder(self.policies, g, self.seed)) for g in goals]
         missing = [f for f in folders if not os.path.isdir(f)]
