@@ -44,7 +44,7 @@ def test_two_trial_sweep_is_killed_and_resumed(tmp_path):
     subprocess.run(args, env=env, check=True, timeout=300)  # all finished: nothing runs again
     assert mtimes == [(tmp_path / n / "summary.json").stat().st_mtime_ns for n in names]
 
-    kept = keep_trial_summaries(tmp_path, tmp_path / "kept", names)
+    kept = keep_trial_summaries(tmp_path, tmp_path / "kept", trial_grid(["push_close"], ["oracle"], [0, 1], TINY))
     summary = gather(kept)
     result = summary["push_close"]["oracle"]
     assert result["seeds"] == 2 and result["steps"] == 512

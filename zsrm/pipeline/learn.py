@@ -5,7 +5,6 @@ Heavy imports (torch, SB3, Ray, MuJoCo) happen inside ``run``, so ``zsrm --help`
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import platform
 from dataclasses import dataclass, field
@@ -90,6 +89,7 @@ class Sweep:
     address: str | None = None  # a Ray cluster to join instead (auto, or ray://HOST:PORT)
     reward_model: str = "student"  # the zsrm reward's model folder, or student (the shipped one)
     out: str = "results/rl/learning.json"  # the gathered summary; the plot beside it (.png), trials in trials/
+    gather_only: bool = False  # train nothing: gather the trials finished so far (e.g. while a sweep runs)
 
     def run(self) -> int:
         from zsrm.evaluation.learning_curves import plot_learning_curves
@@ -102,13 +102,17 @@ class Sweep:
         check_writable(self.out)
         overrides = {"steps": self.steps, "reward_model": self.reward_model}
         out = Path(self.out)
-        ran = sweep(self.root, self.tasks, self.rewards, self.seeds, overrides, num_cpus=self.num_cpus,
-                    address=self.address, kept=out.parent / "trials")
-        print(f"ran {len(ran)} trial(s); the others were finished already")
-        names = [t["name"] for t in trial_grid(self.tasks, self.rewards, self.seeds, overrides)]
-        kept = keep_trial_summaries(self.root, out.parent / "trials", names)
+        if not self.gather_only:
+            ran = sweep(self.root, self.tasks, self.rewards, self.seeds, overrides, num_cpus=self.num_cpus,
+                        address=self.address, kept=out.parent / "trials")
+            print(f"ran {len(ran)} trial(s); the others were finished already")
+        trials = trial_grid(self.tasks, self.rewards, self.seeds, overrides)
+        kept = keep_trial_summaries(self.root, out.parent / "trials", trials)
+        if not kept:
+            print("no finished trials yet")
+            return 0
         summary = gather(kept)
-        out.write_text(json.dumps({**summary, "meta": self.meta(len(kept), len(names))}, indent=2) + "\n")
+        write_json(out, {**summary, "meta": self.meta(len(kept), len(trials))})
         plot_learning_curves(summary, out.with_suffix(".png"))
         for task, rewards in summary.items():
             print(task + ": " + ", ".join(f"{r} {v['final_mean']:.1f}+-{v['final_se']:.1f} ({v['seeds']} seeds)"

@@ -14,6 +14,7 @@ import numpy as np
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.envs import goal_camera, make_vec
+from zsrm.vlm.files import atomic_path
 
 EVAL_SEED = 1_000_000  # evaluation envs: seeds far from the training envs'
 
@@ -124,8 +125,7 @@ class FirstEpisodeFrames:
 def write_gif(frames: list[np.ndarray], path: str | Path, scale: int = 3) -> Path:
     import imageio.v3 as iio
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    iio.imwrite(path, np.stack([np.kron(f, np.ones((scale, scale, 1), np.uint8)) for f in frames]),
-                duration=80, loop=0)
-    return path
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, np.stack([np.kron(f, np.ones((scale, scale, 1), np.uint8)) for f in frames]),
+                    duration=80, loop=0)
+    return Path(path)

@@ -15,7 +15,6 @@ Only images reach the policy and the reward model; the oracle (true state) is re
 from __future__ import annotations
 
 import csv
-import json
 import time
 from pathlib import Path
 
@@ -33,7 +32,7 @@ from zsrm.rl.evaluate import evaluate, random_actions
 from zsrm.rl.features import VecImageFeatures
 from zsrm.rl.policy import PolicyBundle, load_checkpoint, policy_kwargs, save_checkpoint
 from zsrm.vlm import load_vlm
-from zsrm.vlm.files import atomic_path, write_json
+from zsrm.vlm.files import atomic_path, read_json, write_json
 
 EVAL_FIELDS = ("env_steps", "mean", "se", "success_rate", "train_reward", "wall_s")
 FINAL_EPISODES = 30
@@ -118,7 +117,7 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     torch.set_num_threads(cfg.threads)
     out.mkdir(parents=True, exist_ok=True)
     if (out / "summary.json").is_file() and not fresh:
-        summary = json.loads((out / "summary.json").read_text())
+        summary = read_json(out / "summary.json", "a zsrm train summary")
         if summary.get("config", {}) == cfg.to_dict():
             return summary  # finished run: nothing to do
     write_json(out / "config.json", cfg.to_dict())

@@ -27,6 +27,7 @@ import numpy as np
 
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.evaluate import mean_se
+from zsrm.vlm.files import write_text
 
 
 def trial_name(task: str, reward: str, seed: int) -> str:
@@ -133,18 +134,19 @@ def gather(summaries) -> dict:
     return out
 
 
-def keep_trial_summaries(root: str | Path, dest: str | Path, names) -> list[Path]:
-    """Copy the named finished trials' ``summary.json`` (curve included, a few kB) to
-    ``dest/<name>.json``, the small files a results folder keeps under version control."""
+def keep_trial_summaries(root: str | Path, dest: str | Path, trials) -> list[Path]:
+    """Copy the finished trials' ``summary.json`` (curve included, a few kB) to
+    ``dest/<name>.json``, the small files a results folder keeps under version control; returns
+    the kept summaries of the grid's ``trials`` (those finished with the trial's settings)."""
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     kept = []
-    for name in names:
-        src = Path(root) / name / "summary.json"
-        if src.is_file():
-            (dest / f"{name}.json").write_text(src.read_text())
-        if (dest / f"{name}.json").is_file():
-            kept.append(dest / f"{name}.json")
+    for trial in trials:
+        src, copy = Path(root) / trial["name"] / "summary.json", dest / f"{trial['name']}.json"
+        if is_finished(src, trial["config"]):
+            write_text(copy, src.read_text())
+        if is_finished(copy, trial["config"]):
+            kept.append(copy)
     return kept
 
 
