@@ -36,6 +36,10 @@ results: setup
 	$(VENV)/bin/zsrm eval-reward --zsrm runs/zsrm/vlm --compare student=runs/zsrm/student --out results/reward_eval.json
 	$(PY) benchmarks/reward_speed.py --vlm runs/zsrm/vlm --student runs/zsrm/student --out results/reward_speed.json
 	OMP_NUM_THREADS=1 $(PY) benchmarks/robustness.py --out results/robustness.json
+	OMP_NUM_THREADS=1 $(PY) benchmarks/ppo_speed.py --steps 8192 --out results/ppo_speed.json
+	# Learning from pixels (Figure 6 rewards oracle/zsrm/random; hours on 2 cores: 18 PPO runs of 300k steps)
+	$(VENV)/bin/zsrm sweep --tasks push_close place_right stack --rewards oracle zsrm random --seeds 0 1 2 \
+		--out results/rl/learning.json
 	# Table 2 (hours on 2 cores: 18 PPO runs of 200k steps, then rollouts, distillation, 36 x 50 x 2 episodes)
 	$(VENV)/bin/zsrm multitask-policies --steps 200000 --out results/multitask/policies.json
 	$(VENV)/bin/zsrm multitask-rollouts --episodes 50 --out data/multitask/rollouts
