@@ -28,7 +28,7 @@ def plot_learning_curves(summary: dict, path: str | Path, title: str = "") -> Pa
         x_max = max((row["env_steps"] for r in summary[task].values() for row in r.get("curve", [])), default=1)
         for reward, result in summary[task].items():
             colour = REWARD_COLOURS.get(reward)
-            label = f"{reward} ({result['seeds']} seeds)"
+            label = f"{reward} ({result['seeds']} seed{'' if result['seeds'] == 1 else 's'})"
             curve = result.get("curve") or []
             if curve:
                 x = np.array([row["env_steps"] for row in curve])
