@@ -24,7 +24,7 @@ from typing import Callable, Literal
 from zsrm.vlm.files import check_writable, read_json, write_json
 
 SCALES: dict[str, dict] = {
-    "demo": {"task": "push_close", "steps": 60_000, "seeds": (0,), "episodes": 30},
+    "demo": {"task": "push_close", "steps": 120_000, "seeds": (0,), "episodes": 30},
     # the demo's stages in seconds, for tests
     "tiny": {"task": "push_close", "steps": 256, "seeds": (0,), "episodes": 2,
              "train": dict(n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, eval_every=128,
