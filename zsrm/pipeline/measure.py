@@ -16,7 +16,7 @@ from typing import Literal
 
 from zsrm.data.dataset import LABELS
 from zsrm.evaluation.curves import FIGURE5_GOAL
-from zsrm.tasks.catalogue import REPORT_TASKS
+from zsrm.tasks.catalogue import REPORT_TASKS, SPATIAL_TASKS
 from zsrm.vlm import files
 from zsrm.vlm.factory import DEFAULT_VLM
 
@@ -53,7 +53,7 @@ class Render:
 class ScriptedEval:
     """Success of the true-state scripted controllers (proves every task achievable)."""
 
-    tasks: tuple[str, ...] = REPORT_TASKS  # catalogue tasks
+    tasks: tuple[str, ...] = SPATIAL_TASKS  # catalogue tasks (default: every spatial task)
     episodes: int = 20  # seeded episodes per task (seeds 0..EPISODES-1)
     out: str | None = None  # JSON path, e.g. results/scripted_success.json
 

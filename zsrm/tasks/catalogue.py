@@ -39,6 +39,12 @@ SINGLE_TASKS: dict[str, CatalogueEntry] = {
         CatalogueEntry("stack", TABLETOP_ID, "a yellow block on top of a red block"),
         CatalogueEntry("place_right", TABLETOP_ID, "a yellow block on the right of a red block"),
         CatalogueEntry("place_left", TABLETOP_ID, "a yellow block on the left of a red block"),
+        # One task for each further relation of Table 1 the tabletop can show (inside of needs a
+        # container the scene does not have yet).
+        CatalogueEntry("place_below", TABLETOP_ID, "a red block below a yellow block"),
+        CatalogueEntry("place_between", TABLETOP_ID, "a yellow block in between a red block and a green block"),
+        CatalogueEntry("place_front", TABLETOP_ID, "a yellow block in front of a red block"),
+        CatalogueEntry("place_behind", TABLETOP_ID, "a yellow block behind a red block"),
         CatalogueEntry("pendulum", PENDULUM_ID, "an inverted pendulum standing upright"),
     )
 }
@@ -46,6 +52,8 @@ SINGLE_TASKS: dict[str, CatalogueEntry] = {
 
 # The spatial single tasks every report and evaluation runs (one per scene and relation kind).
 REPORT_TASKS = ("stack", "place_left", "place_right", "push_close")
+# Every catalogue task with a spatial goal (all but the pendulum).
+SPATIAL_TASKS = tuple(name for name, entry in SINGLE_TASKS.items() if entry.env_id != PENDULUM_ID)
 
 
 def _multitask(pairs) -> list[Task]:
