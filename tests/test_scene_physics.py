@@ -102,3 +102,38 @@ def test_action_repeat_counts_every_control_step_of_the_episode():
     assert steps == 25
     with pytest.raises(ValueError, match="action_repeat"):
         PushingEnv(image_size=16, action_repeat=0)
+
+
+def test_objects_with_a_task_are_distractors_that_leave_the_goal_alone():
+    from zsrm.envs.rollout import make_env, run_episode
+    from zsrm.envs.scripted import scripted_controller
+
+    env = make_env("stack", image_size=32, objects=("yellow", "red", "green", "blue"))
+    base = env.unwrapped
+    assert base.objects == ("yellow", "red", "green", "blue") and base.distractors == ("green", "blue")
+    _, info = env.reset(seed=0)
+    pos = info["object_positions"]
+    assert set(pos) == {"yellow", "red", "green", "blue"}
+    for colour in ("green", "blue"):  # behind the strip the goal's blocks start and move in
+        assert pos[colour][1] > 0.12 and pos[colour][2] < TABLE_TOP + 0.05
+    assert run_episode(env, scripted_controller, seed=0)["success"]  # the goal is still reachable
+    with pytest.raises(Exception, match="unknown colour"):
+        make_env("stack", image_size=32, objects=("yellow", "purple"))
+
+
+def test_the_zsrm_reward_on_a_scene_with_a_distractor():
+    from zsrm.envs.rollout import episode_steps, make_env
+    from zsrm.envs.scripted import scripted_controller
+    from zsrm.fullmodel import load_reward_backbone
+    from zsrm.rewards import ZSRMReward
+
+    reward = ZSRMReward(load_reward_backbone("student"))
+    goal = "a yellow block on top of a red block"
+    env = make_env("stack", objects=("yellow", "red", "green"))
+    frames, truth = [], []
+    for t, obs, info, _ in episode_steps(env, scripted_controller, seed=3):
+        frames.append(obs["front"])
+        truth.append(info["is_success"])
+    rewards = reward({"front": np.stack(frames)}, goal)
+    assert rewards[0] == 0 and truth[-1] and rewards[-1] == 1  # 0 at the start, 1 once stacked
+    assert (rewards == np.array(truth)).mean() > 0.85

@@ -80,9 +80,14 @@ class MujocoPixelEnv(gym.Env):
             raise ValueError(f"unknown spread {spread!r}; choose one of {', '.join(SPREADS)}")
         if not isinstance(image_size, (int, np.integer)) or not 16 <= image_size <= 512:
             raise ValueError(f"image_size must be an integer in [16, 512], got {image_size!r}")
-        # task=None: exploration mode, ``objects`` (colours) at random places, no oracle.
+        # task=None: exploration mode, ``objects`` (colours) at random places, no oracle. With a
+        # task, ``objects`` that the goal does not name are distractors.
         self.task = None if task is None else as_task(task, self.shape)
-        self.objects = self.task.objects if self.task else check_colours(objects)
+        if self.task is None:
+            self.objects, self.distractors = check_colours(objects), ()
+        else:
+            extra = () if objects is None else tuple(c for c in check_colours(objects) if c not in self.task.objects)
+            self.objects, self.distractors = self.task.objects + extra, extra
         self.cameras = check_cameras(cameras)
         self.image_size = int(image_size)
         self.spread = spread
@@ -171,6 +176,8 @@ class MujocoPixelEnv(gym.Env):
         rel = self.task.relation
         for _ in range(1000):
             layout = self._initial_layout()
+            for colour in self.distractors:
+                layout[colour] = self._distractor_position()
             pts = list(layout.values())
             apart = all(np.linalg.norm(a[:2] - b[:2]) > 2.6 * self.object_half_size
                         for i, a in enumerate(pts) for b in pts[i + 1:])
@@ -178,6 +185,13 @@ class MujocoPixelEnv(gym.Env):
             if apart and on_table and not holds_in_world(rel, [layout[c] for c in self.task.objects]):
                 return layout
         raise RuntimeError(f"could not sample a start state for {self.task.text!r}")
+
+    def _distractor_position(self) -> np.ndarray:
+        """A distractor starts at the back of the table, behind the strip where the task's
+        objects start and move (y within about +-0.1 m), so it neither meets the goal's objects
+        nor stands where they must go; the oracle reads the goal's objects only."""
+        rng = self.np_random
+        return np.array([rng.uniform(-0.2, 0.2), rng.uniform(0.13, 0.16), TABLE_TOP + self.rest_height])
 
     def _initial_layout(self) -> dict[str, np.ndarray]:
         raise NotImplementedError

@@ -44,6 +44,13 @@ class EvalFrames:
     def __len__(self) -> int:
         return len(self.success)
 
+    @classmethod
+    def concat(cls, task: str, parts: list["EvalFrames"]) -> "EvalFrames":
+        """The frames of several evaluations of one goal as one set named ``task``."""
+        arrays = {k: np.concatenate([getattr(p, k) for p in parts])
+                  for k in ("images", "success", "source", "episode", "step")}
+        return cls(task, parts[0].goal, parts[0].camera, **arrays)
+
 
 def task_camera(task: str) -> str:
     entry = _entry(task)
@@ -58,10 +65,11 @@ def _entry(task: str):
 
 
 def rollout_frames(task: str, scripted_episodes: int = 10, random_episodes: int = 10, seed: int = 10_000,
-                   every: int = 2, image_size: int = 64, progress: bool = True) -> EvalFrames:
+                   every: int = 2, image_size: int = 64, progress: bool = True, distractors: tuple = ()) -> EvalFrames:
     """Frames every ``every`` steps (and the reset frame) of scripted and random episodes.
 
     Episode seeds are ``seed + i``; scripted and random episodes use different seeds.
+    ``distractors``: colours of more objects in the scene, which the goal does not name.
     """
     from tqdm import tqdm
 
@@ -71,12 +79,14 @@ def rollout_frames(task: str, scripted_episodes: int = 10, random_episodes: int 
         raise ValueError(f"every must be >= 1, got {every}")
     entry = _entry(task)
     camera = task_camera(task)
-    env = make_env(task, cameras=(camera,), image_size=image_size)
+    objects = entry.task.objects + tuple(distractors) if distractors else None
+    env = make_env(task, cameras=(camera,), image_size=image_size, objects=objects)
     images, success, source, episodes, steps = [], [], [], [], []
     plan = [("scripted", seed + i) for i in range(scripted_episodes)]
     plan += [("random", seed + scripted_episodes + i) for i in range(random_episodes)]
     try:
-        for kind, ep_seed in tqdm(plan, desc=f"eval frames {task}", unit="episode", disable=not progress):
+        desc = f"eval frames {task}" + (f" + {', '.join(distractors)}" if distractors else "")
+        for kind, ep_seed in tqdm(plan, desc=desc, unit="episode", disable=not progress):
             for t, obs, info, done in episode_steps(env, POLICIES[kind], ep_seed):
                 if not done and t % every == 0:  # the frames an agent acts on: not the final one
                     images.append(obs[camera])
@@ -88,6 +98,19 @@ def rollout_frames(task: str, scripted_episodes: int = 10, random_episodes: int 
         env.close()
     return EvalFrames(task, entry.goal, camera, np.stack(images), np.array(success), np.array(source),
                       np.array(episodes), np.array(steps))
+
+
+def distractor_frames(task: str, scripted_episodes: int = 10, random_episodes: int = 10, seed: int = 10_000,
+                      every: int = 2, progress: bool = True) -> EvalFrames:
+    """The task's evaluation frames with one distractor of each colour the goal does not name
+    (the same episodes per colour), as one set named ``<task>_distractor``."""
+    from zsrm.tasks.language import COLOURS
+
+    entry = _entry(task)
+    others = [c for c in COLOURS if c not in entry.task.objects]
+    parts = [rollout_frames(task, scripted_episodes, random_episodes, seed, every, progress=progress,
+                            distractors=(colour,)) for colour in others]
+    return EvalFrames.concat(f"{task}_distractor", parts)
 
 
 def reward_metrics(binary, raw, margin, truth) -> dict:

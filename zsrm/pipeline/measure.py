@@ -240,6 +240,7 @@ class EvalReward:
     base: str = DEFAULT_VLM  # the base VLM (spec)
     base_mode: Literal["dot", "cosine"] = "dot"  # the base reward's raw score (dot: paper 2.1)
     tasks: tuple[str, ...] = REPORT_TASKS  # catalogue tasks
+    distractor_tasks: tuple[str, ...] = ("stack",)  # also with one distractor of each other colour, as TASK_distractor
     scripted_episodes: int = 10  # scripted episodes per task
     random_episodes: int = 10  # random-action episodes per task
     every: int = 2  # keep every this many steps' frame
@@ -252,7 +253,7 @@ class EvalReward:
     def run(self) -> int:
         import numpy as np
 
-        from zsrm.evaluation.reward_quality import evaluate_rewards, rollout_frames
+        from zsrm.evaluation.reward_quality import distractor_frames, evaluate_rewards, rollout_frames
         from zsrm.rewards.base import BaseReward
 
         files.check_writable(self.out)
@@ -261,6 +262,9 @@ class EvalReward:
         names, models, base_vlm = self._models()
         frames = {t: rollout_frames(t, self.scripted_episodes, self.random_episodes, self.seed, self.every,
                                     progress=not self.quiet) for t in self.tasks}
+        for t in self.distractor_tasks:
+            frames[f"{t}_distractor"] = distractor_frames(t, self.scripted_episodes, self.random_episodes, self.seed,
+                                                          self.every, progress=not self.quiet)
 
         def base_raw(f):
             return BaseReward(base_vlm, camera=f.camera, mode=self.base_mode).score(f.images, f.goal)
@@ -335,7 +339,7 @@ class EvalReward:
         width = max(14, *(len(k) + 8 for k in models))
         header = f"{'task':<12}" + "".join(f"{k + ' F1':>{width}}" for k in models)
         print(header + "".join(f"{k + ' AUROC':>{width}}" for k in models))
-        for t in self.tasks:
+        for t in [*self.tasks, *(f"{d}_distractor" for d in self.distractor_tasks)]:
             row = f"{t:<12}" + "".join(f"{results[k][t]['f1']:>{width}.3f}" for k in models)
             print(row + "".join(f"{results[k][t]['auroc']:>{width}.3f}" for k in models))
 
