@@ -55,10 +55,13 @@ class PickPlaceController:
             return pos[objs[1]] + (0, 0, W)
         if rel == "below":
             return pos[objs[0]] + (0, 0, W)
+        # Two block widths aside, but within the gripper's reach (else the script would hover
+        # at the workspace edge with the block in the air for the rest of the episode).
+        reach = tabletop.X_RANGE[1] - 0.01
         if rel == "left_of":
-            return np.array([pos[objs[1]][0] - 2 * W, pos[objs[1]][1], on_table])
+            return np.array([max(pos[objs[1]][0] - 2 * W, -reach), pos[objs[1]][1], on_table])
         if rel == "right_of":
-            return np.array([pos[objs[1]][0] + 2 * W, pos[objs[1]][1], on_table])
+            return np.array([min(pos[objs[1]][0] + 2 * W, reach), pos[objs[1]][1], on_table])
         if rel == "in_between":
             mid = (pos[objs[1]] + pos[objs[2]]) / 2
             return np.array([mid[0], mid[1], on_table])
