@@ -207,19 +207,21 @@ def writer_commands(tmp_path, out, dataset) -> dict[str, list[str]]:
         "multitask-rollouts": ["multitask-rollouts", "--out", str(out)],
         "distill": ["distill", "--out", str(out)],
         "eval-multitask": ["eval-multitask", "--out", str(out / "table2.json")],
+        "eval-goals": ["eval-goals", "--out", str(out / "goals.json")],
     }
 
 
 def test_every_writing_command_is_listed():
-    # zsrm reward and parse-goal print what they find; eval-goals is the goal-parsing work's own.
-    writes = set(COMMANDS) - {"reward", "parse-goal", "eval-goals"}
+    # zsrm reward and parse-goal print what they find.
+    writes = set(COMMANDS) - {"reward", "parse-goal"}
     assert writes <= set(writer_commands(Path("."), Path("."), Path(".")))
 
 
 @pytest.mark.parametrize("command", ["collect", "render", "scripted-eval", "reward-curve", "eval-reward", "label",
                                      "finetune", "eval-grounding", "reward-data", "pretrain-vlm", "eval-vlm",
                                      "demo", "train", "rollout", "sweep", "plot", "reproduce",
-                                     "multitask-policies", "multitask-rollouts", "distill", "eval-multitask"])
+                                     "multitask-policies", "multitask-rollouts", "distill", "eval-multitask",
+                                     "eval-goals"])
 def test_an_unwritable_output_is_one_line_before_any_work(command, dataset, tmp_path, capsys, monkeypatch):
     def no_work(*args, **kwargs):
         raise AssertionError("work started before the output was checked")
@@ -227,7 +229,7 @@ def test_an_unwritable_output_is_one_line_before_any_work(command, dataset, tmp_
     for target in ("zsrm.data.collect.collect", "zsrm.vlm.factory.load_vlm", "zsrm.rl.ppo.train",
                    "zsrm.rl.evaluate.rollout", "zsrm.rl.sweep.sweep", "zsrm.fullmodel.training.finetune",
                    "zsrm.evaluation.scripted_success.scripted_success", "zsrm.pipeline.demo.write_reward_curves",
-                   "zsrm.pipeline.reproduce.run_stages"):
+                   "zsrm.pipeline.reproduce.run_stages", "zsrm.evaluation.goal_parsing.score_goals"):
         monkeypatch.setattr(target, no_work)
     for where, out in H.unwritable_paths(tmp_path).items():
         assert main(writer_commands(tmp_path, out, dataset)[command]) == 2, where
