@@ -142,7 +142,7 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     model.set_logger(configure(str(out / "tb"), ["tensorboard"]))
     # PPO stops only at a rollout's end: train whole rollouts, never past cfg.steps.
     rollout = cfg.n_envs * cfg.n_steps * cfg.action_repeat
-    remaining = max(0, max(rollout, cfg.steps // rollout * rollout) - done_steps)
+    remaining = max(0, max(rollout, cfg.steps // rollout * rollout) - done_steps) // rollout * rollout
     with tqdm(total=cfg.steps, initial=done_steps, unit="step", desc=f"train {cfg.reward} {cfg.goal}",
               disable=not progress, smoothing=0.05) as bar:
         callback = EvalAndCheckpoint(cfg, out, vlm, rows, bar, on_eval, extra_modules)
