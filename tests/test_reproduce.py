@@ -26,7 +26,7 @@ def test_tiny_pipeline_writes_every_artifact(tiny_report):
     report, workdir = tiny_report
     page = (report / "index.html").read_text()
     markdown = (report / "README.md").read_text()
-    assert "A policy learns from a sentence" in page and "A policy learns from a sentence" in markdown
+    assert "A policy trained from a sentence" in page and "Learning signal" in markdown
     figures = re.findall(r'<img class="figure" src="([^"]+)"', page)
     assert len(figures) >= 3  # the learning curve and the two GIFs at least
     for src in figures:

@@ -113,7 +113,7 @@ def demo_section(report: Report, result: dict, workdir: Path):
     from zsrm.evaluation.learning_curves import plot_learning_curves
 
     task = result["task"]
-    report.heading("A policy learns from a sentence")
+    report.heading("A policy trained from a sentence")
     report.text(f"PPO trained on {task} with the zsrm reward (the shipped student reward model, binarised: "
                 f"1 when the goal sentence beats its negatives on the frame) for {result['zsrm_policy_env_steps']} "
                 f"env steps, against a uniform random policy; oracle episode reward (steps of 100 in the goal "
@@ -121,6 +121,11 @@ def demo_section(report: Report, result: dict, workdir: Path):
     report.table(["policy", "oracle episode reward", "s.e."],
                  [["trained with the zsrm reward", f"{result['zsrm_policy_mean']:.1f}", f"{result['zsrm_policy_se']:.1f}"],
                   ["random", f"{result['random_policy_mean']:.1f}", f"{result['random_policy_se']:.1f}"]])
+    gap = result["zsrm_policy_mean"] - result["random_policy_mean"]
+    margin = result["zsrm_policy_se"] + result["random_policy_se"]
+    report.text(f"Learning signal: the trained policy is {gap:+.1f} against random; "
+                + ("more than" if gap > margin else "NOT more than") +
+                f" the two standard errors combined ({margin:.1f}).")
     summary = json.loads((workdir / "policy_zsrm" / "summary.json").read_text())
     rand = json.loads((workdir / "policy_random" / "summary.json").read_text())
     curves = {task: {"zsrm": {"curve": [{**r, "se": r["se"]} for r in summary["curve"]], "seeds": 1,
