@@ -17,6 +17,7 @@ from zsrm.data.dataset import LABELS
 from zsrm.fullmodel.training import FinetuneConfig
 from zsrm.grounding.annotate import LabelConfig
 from zsrm.pipeline import narrow
+from zsrm.vlm.factory import DEFAULT_VLM
 from zsrm.vlm.files import check_writable
 from zsrm.vlm.pretrain import PretrainConfig
 
@@ -117,6 +118,7 @@ class RewardData:
     labels: str = LABELS  # labels folder inside OUT
     eps_y: float = 0.12  # on top of / below: largest height offset (m)
     close: float = 0.12  # close to: largest centre distance (m)
+    vlm: str = DEFAULT_VLM  # the VLM whose Grad-CAM labels the frames: scene, a saved folder, open_clip:MODEL[:TAG]
     quiet: bool = False  # no progress bars
 
     def collect_config(self) -> CollectConfig:
@@ -128,7 +130,7 @@ class RewardData:
 
         from zsrm.tasks.relations import WORLD_THRESHOLDS
 
-        return LabelConfig(cell_centres="grid",
+        return LabelConfig(cell_centres="grid", vlm=self.vlm,
                            thresholds={**asdict(WORLD_THRESHOLDS), "eps_y": self.eps_y, "close": self.close})
 
     def run(self) -> int:

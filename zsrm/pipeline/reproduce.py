@@ -125,7 +125,8 @@ def cpu_stages(scale: dict, vlm: str, address: str | None) -> list[Stage]:
         return {"vlm": str(folder / "model")}
 
     def data(folder: Path) -> dict:
-        RewardData(out=str(folder)).run()  # labelled with the shipped scene VLM's Grad-CAM
+        labeller = str(folder.parent / "vlm" / "model") if vlm == "scene" else vlm
+        RewardData(out=str(folder), vlm=labeller).run()  # Grad-CAM of the VLM of this run
         return {"data": str(folder)}
 
     def student(folder: Path) -> dict:
@@ -141,7 +142,7 @@ def cpu_stages(scale: dict, vlm: str, address: str | None) -> list[Stage]:
         return {"summary": str(folder / "learning.json")}
 
     stages = [
-        Stage("data", "random exploration frames, Grad-CAM captions", {}, data, "zsrm reward-data"),
+        Stage("data", "random exploration frames, Grad-CAM captions", {"vlm": vlm}, data, "zsrm reward-data"),
         Stage("student", "the student reward model on the captions", {"vlm": vlm, "steps": 4000}, student,
               "zsrm finetune --student --steps 4000"),
         Stage("policies", "PPO with oracle, zsrm and random on the tasks (Ray sweep)",
