@@ -10,7 +10,8 @@ each map's peak strength (:class:`KeypointExtractor`, after Levine et al. 2016).
 The VLM was pretrained to tell which coloured objects are present; it hardly sees the gripper
 (a probe on its map reads the fingers' open/closed state no better than chance). So a small
 CNN on the raw image, trained by RL, adds its own keypoints (``pixels=True``): with it the
-probe reads the grip state and the gripper's position about twice as well.
+probe's error on the grip state falls from 0.45 to 0.11 and on the gripper's position from
+2.3 to 0.7 cm (``python benchmarks/policy_vision_probe.py``).
 """
 from __future__ import annotations
 
