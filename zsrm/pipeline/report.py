@@ -128,7 +128,7 @@ def demo_section(report: Report, result: dict, workdir: Path):
                 f" the two standard errors combined ({margin:.1f}).")
     summary = json.loads((workdir / "policy_zsrm" / "summary.json").read_text())
     rand = json.loads((workdir / "policy_random" / "summary.json").read_text())
-    curves = {task: {"zsrm": {"curve": [{**r, "se": r["se"]} for r in summary["curve"]], "seeds": 1,
+    curves = {task: {"zsrm": {"curve": summary["curve"], "seeds": 1,
                               "final_mean": summary["final_mean"], "final_se": summary["final_se"]},
                      "random": {"curve": [], "seeds": 1, "final_mean": rand["final_mean"], "final_se": rand["final_se"]}}}
     png = plot_learning_curves(curves, workdir / "gifs" / "demo_learning.png")

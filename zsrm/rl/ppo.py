@@ -170,8 +170,6 @@ def rewarded_env(cfg: TrainConfig, out: Path, done_steps: int):
 
 def finish_random(cfg: TrainConfig, out: Path) -> dict:
     """The uniform random policy's oracle metric (the `random` baseline of the results)."""
-    from zsrm.rl.envs import task_entry  # noqa: F401  (validates the goal)
-
     probe = make_vec(cfg, 1, 0)
     act = random_actions(probe.action_space, cfg.seed)
     probe.close()
