@@ -74,9 +74,9 @@ def test_catalogue_matches_section_3_3():
     assert all("blue" in t.objects for t in TEST_TASKS)
     assert {t.relation for t in TRAIN_TASKS} == {"on_top_of", "left_of", "right_of"}
     assert set(SINGLE_TASKS) == {"push_close", "stack", "place_right", "place_left", "place_below", "place_between",
-                                 "place_front", "place_behind", "pendulum"}
+                                 "place_front", "place_behind", "place_inside", "pendulum"}
     relations = {e.task.relation for e in SINGLE_TASKS.values() if e.task is not None}
-    assert relations == set(RELATIONS) - {"inside_of"}  # inside of needs a container (not in the scene yet)
+    assert relations == set(RELATIONS)  # one task per relation of Table 1
     assert SINGLE_TASKS["stack"].task == Task("on_top_of", ("yellow", "red"))
     assert SINGLE_TASKS["pendulum"].task is None
 

@@ -48,13 +48,14 @@ def check_cameras(cameras) -> tuple[str, ...]:
     return cameras
 
 
-def check_colours(colours) -> tuple[str, ...]:
+def check_colours(colours, containers=()) -> tuple[str, ...]:
+    """Objects of a scene: colours, and the scene's ``containers`` ("box" on the tabletop)."""
     colours = tuple(colours or ())
     if not colours:
         raise ValueError("give a task, or the objects (colours) of an exploration scene")
     for c in colours:
-        if c not in COLOURS:
-            raise GoalError(f"unknown colour {c!r}; known colours: {', '.join(COLOURS)}")
+        if c not in COLOURS and c not in containers:
+            raise GoalError(f"unknown colour {c!r}; known colours: {', '.join(COLOURS + tuple(containers))}")
     if len(set(colours)) != len(colours):
         raise ValueError(f"objects must differ, got {', '.join(colours)}")
     return colours
@@ -69,6 +70,7 @@ class MujocoPixelEnv(gym.Env):
     shape: str  # "block" or "puck": the object bodies are named f"{shape}_{colour}"
     object_half_size: float
     rest_height: float  # height of an object's centre above the table when it rests on it
+    containers: tuple[str, ...] = ()  # objects named by noun, not colour (bodies named as they are)
     frame_skip = 8  # 8 x 5 ms = one 0.04 s control step
 
     def __init__(self, task, cameras=("front",), image_size: int = 64, spread: str = "seen",
@@ -84,9 +86,10 @@ class MujocoPixelEnv(gym.Env):
         # task, ``objects`` that the goal does not name are distractors.
         self.task = None if task is None else as_task(task, self.shape)
         if self.task is None:
-            self.objects, self.distractors = check_colours(objects), ()
+            self.objects, self.distractors = check_colours(objects, self.containers), ()
         else:
-            extra = () if objects is None else tuple(c for c in check_colours(objects) if c not in self.task.objects)
+            extra = () if objects is None else tuple(
+                c for c in check_colours(objects, self.containers) if c not in self.task.objects)
             self.objects, self.distractors = self.task.objects + extra, extra
         self.cameras = check_cameras(cameras)
         self.image_size = int(image_size)
@@ -105,13 +108,14 @@ class MujocoPixelEnv(gym.Env):
 
     # --- objects -------------------------------------------------------------------------
     def _body(self, colour: str) -> int:
-        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f"{self.shape}_{colour}")
+        name = colour if colour in self.containers else f"{self.shape}_{colour}"
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
 
     def _qpos_adr(self, colour: str) -> int:
         return self.model.jnt_qposadr[self.model.body_jntadr[self._body(colour)]]
 
     def _hide_unused_objects(self):
-        for i, colour in enumerate(COLOURS):
+        for i, colour in enumerate(COLOURS + self.containers):
             if colour in self.objects:
                 continue
             body = self._body(colour)
@@ -172,7 +176,11 @@ class MujocoPixelEnv(gym.Env):
     def _sample_layout(self, options: dict | None = None) -> dict[str, np.ndarray]:
         """Initial positions that do not overlap and are not already in the goal relation."""
         if self.task is None:
-            return self._random_layout(**(options or {}))
+            for _ in range(100):
+                layout = self._random_layout(**(options or {}))
+                if self._layout_ok(layout):
+                    break
+            return layout
         rel = self.task.relation
         for _ in range(1000):
             layout = self._initial_layout()
@@ -182,7 +190,8 @@ class MujocoPixelEnv(gym.Env):
             apart = all(np.linalg.norm(a[:2] - b[:2]) > 2.6 * self.object_half_size
                         for i, a in enumerate(pts) for b in pts[i + 1:])
             on_table = all(abs(p[0]) < 0.26 and abs(p[1]) < 0.18 for p in pts)
-            if apart and on_table and not holds_in_world(rel, [layout[c] for c in self.task.objects]):
+            if (apart and on_table and self._layout_ok(layout)
+                    and not holds_in_world(rel, [layout[c] for c in self.task.objects])):
                 return layout
         raise RuntimeError(f"could not sample a start state for {self.task.text!r}")
 
@@ -195,6 +204,10 @@ class MujocoPixelEnv(gym.Env):
 
     def _initial_layout(self) -> dict[str, np.ndarray]:
         raise NotImplementedError
+
+    def _layout_ok(self, layout: dict[str, np.ndarray]) -> bool:
+        """Scene-specific check of a start layout (the tabletop keeps blocks out of the box)."""
+        return True
 
     def _random_layout(self, p_stack: float = 0.25, p_side: float = 0.0) -> dict[str, np.ndarray]:
         """Exploration: objects anywhere on the table; with probability ``p_stack`` a block
@@ -271,6 +284,8 @@ class MujocoPixelEnv(gym.Env):
         """One control step of physics, then the object speed limit."""
         mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
         for colour in self.objects:
+            if colour in self.containers:  # fixed to the world: no velocity to limit
+                continue
             adr = self.model.jnt_dofadr[self.model.body_jntadr[self._body(colour)]]
             v = self.data.qvel[adr:adr + 3]
             speed = float(np.linalg.norm(v))

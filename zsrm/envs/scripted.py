@@ -40,10 +40,10 @@ class PickPlaceController:
     def __init__(self, env: tabletop.TabletopEnv):
         self.env = env
         rel, objs = env.task.relation, env.task.objects
-        if rel == "inside_of":
-            raise NotImplementedError("the tabletop has no container, so no script for 'inside of'")
+        if rel == "inside_of" and objs[1] not in tabletop.CONTAINERS:
+            raise NotImplementedError("only the box is a container: no script for 'inside of' another block")
         # below(a, b) is done by putting b on a; everything else moves the first object.
-        self.mover = objs[1] if rel == "below" else objs[0]
+        self.mover = env.task_mover(env.task)
         self.phase, self.wait = "approach", 0
 
     def _goal(self) -> np.ndarray:
@@ -55,6 +55,8 @@ class PickPlaceController:
             return pos[objs[1]] + (0, 0, W)
         if rel == "below":
             return pos[objs[0]] + (0, 0, W)
+        if rel == "inside_of":  # over the box, the block's bottom 1 cm above the walls: dropped in
+            return np.array([*pos[objs[1]][:2], TABLE_TOP + 2 * tabletop.BOX_HALF_HEIGHT + 0.01 + W / 2])
         # Two block widths aside, but within the gripper's reach (else the script would hover
         # at the workspace edge with the block in the air for the rest of the episode).
         reach = tabletop.X_RANGE[1] - 0.01
@@ -81,6 +83,13 @@ class PickPlaceController:
             return np.array([d[0], d[2], grip], dtype=np.float32), np.linalg.norm((target - g)[[0, 2]]) < 0.004
         return np.array([*d, grip], dtype=np.float32), np.linalg.norm(target - g) < 0.004
 
+    def _held_target(self, goal) -> np.ndarray:
+        """Where the gripper goes to put the held block at ``goal``. Into the box: with the block's
+        true offset from the gripper (a block grasped off-centre would land on a wall)."""
+        if self.env.task.relation == "inside_of":
+            return goal + self.env.gripper_position - self.env.object_positions()[self.mover]
+        return goal + (0, 0, GRASP_DZ + 0.004)
+
     def __call__(self) -> np.ndarray:
         env = self.env
         block = env.object_positions()[self.mover]
@@ -103,15 +112,16 @@ class PickPlaceController:
             if done:
                 self.phase = "carry"
         elif self.phase == "carry":
-            action, done = self._move(np.array([goal[0], goal[1], HOVER_Z]), 1.0)
+            target = self._held_target(goal)
+            action, done = self._move(np.array([target[0], target[1], HOVER_Z]), 1.0)
             if done:
                 self.phase = "lower"
         elif self.phase == "lower":
-            action, done = self._move(goal + (0, 0, GRASP_DZ + 0.004), 1.0)
+            action, done = self._move(self._held_target(goal), 1.0)
             if done:
                 self.phase, self.wait = "release", 3
         elif self.phase == "release":
-            action, _ = self._move(goal + (0, 0, GRASP_DZ + 0.004), -1.0)
+            action, _ = self._move(self._held_target(goal), -1.0)
             self.wait -= 1
             if self.wait <= 0:
                 self.phase = "retreat"

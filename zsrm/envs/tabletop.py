@@ -1,4 +1,5 @@
-"""Fetch-like tabletop: pick, carry, stack and place coloured blocks with a two-finger gripper."""
+"""Fetch-like tabletop: pick, carry, stack and place coloured blocks with a two-finger gripper, and
+drop them into an open box (the object "box", present where a goal or ``objects`` names it)."""
 from __future__ import annotations
 
 import gymnasium as gym
@@ -6,9 +7,13 @@ import mujoco
 import numpy as np
 
 from zsrm.envs.base import TABLE_TOP, MujocoPixelEnv
+from zsrm.tasks.lexicon import CONTAINERS
 from zsrm.tasks.relations import RELATIONS
 
 BLOCK_HALF = 0.03
+# The open box (MJCF "box"): outer half-width, inner half-width, half-height (its origin is the
+# centre of its height); blocks drop in over walls BOX_HALF_HEIGHT * 2 high.
+BOX_HALF, BOX_INNER_HALF, BOX_HALF_HEIGHT = 0.05, 0.042, 0.02
 MAX_MOVE = 0.03  # metres of gripper motion per step at |action| = 1
 # Gripper workspace (gripper body origin; fingertips reach 0.08 below it).
 X_RANGE = (-0.2, 0.2)  # fingers (6.1 cm out) cannot push a block past the edge (0.32)
@@ -43,6 +48,7 @@ class TabletopEnv(MujocoPixelEnv):
     asset = "tabletop.xml"
     shape = "block"
     object_half_size = BLOCK_HALF
+    containers = CONTAINERS
 
     rest_height = BLOCK_HALF
 
@@ -60,7 +66,8 @@ class TabletopEnv(MujocoPixelEnv):
         self._mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "mocap")]
         self._gripper = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "gripper")
         self._gripper_qadr = m.jnt_qposadr[m.body_jntadr[self._gripper]]
-        self._grasp_eq = {c: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f"grasp_{c}") for c in self.objects}
+        self._grasp_eq = {c: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f"grasp_{c}")
+                          for c in self.objects if c not in CONTAINERS}  # the box is not grasped
         self.held: str | None = None
         self.closed = False  # the grip state the hysteresis keeps
 
@@ -82,7 +89,7 @@ class TabletopEnv(MujocoPixelEnv):
             xs, ys = [-w, w], [1.3 * w, -1.3 * w]
         elif rel == "behind":
             xs, ys = [-w, w], [-1.3 * w, 1.3 * w]
-        else:  # close_to, inside_of
+        else:  # close_to, inside_of (the box starts two block widths from the block)
             xs, ys = [side * 2 * w, -side * 2 * w], [0, 0]
         planar = self.action_mode == "planar"
         layout = {}
@@ -92,6 +99,20 @@ class TabletopEnv(MujocoPixelEnv):
         assert len(layout) == n
         return layout
 
+    def _layout_ok(self, layout) -> bool:
+        """Every block starts clear of the box's walls (a 1 cm gap), never in or on it."""
+        if "box" not in layout:
+            return True
+        box = layout["box"]
+        clear = BOX_HALF + BLOCK_HALF + 0.01
+        return all(np.max(np.abs(p[:2] - box[:2])) > clear for c, p in layout.items() if c != "box")
+
+    def _set_object(self, colour: str, xyz):
+        if colour in CONTAINERS:  # fixed to the world: move the body, standing on the table
+            self.model.body_pos[self._body(colour)] = (xyz[0], xyz[1], TABLE_TOP + BOX_HALF_HEIGHT)
+        else:
+            super()._set_object(colour, xyz)
+
     def _reset_agent(self):
         """Task scenes: the gripper starts open above the block the goal moves (within one block
         width, its fingertips 1-6 cm above the block), so exploration touches it; exploration
@@ -100,8 +121,7 @@ class TabletopEnv(MujocoPixelEnv):
         y = 0.0 if self.action_mode == "planar" else rng.uniform(-0.08, 0.08)
         pos = np.array([rng.uniform(-0.15, 0.15), y, rng.uniform(TABLE_TOP + 0.15, TABLE_TOP + 0.25)])
         if self.task is not None:
-            rel, objs = self.task.relation, self.task.objects
-            mover = objs[1] if rel == "below" else objs[0]
+            mover = self.task_mover(self.task)
             block = self.data.qpos[self._qpos_adr(mover):self._qpos_adr(mover) + 3]
             pos[0] = block[0] + rng.uniform(-2 * BLOCK_HALF, 2 * BLOCK_HALF)
             if self.action_mode == "full":
@@ -115,6 +135,13 @@ class TabletopEnv(MujocoPixelEnv):
         self.data.eq_active[list(self._grasp_eq.values())] = 0
         self.held = None
         self.closed = False
+
+    @staticmethod
+    def task_mover(task) -> str:
+        """The block a task moves: below(a, b) puts b on a; the box never moves."""
+        objs = task.objects
+        order = (objs[1], objs[0]) if task.relation == "below" else objs
+        return next(c for c in order if c not in CONTAINERS)
 
     # --- control -----------------------------------------------------------------------
     @property
@@ -150,6 +177,8 @@ class TabletopEnv(MujocoPixelEnv):
     def _block_between_fingers(self) -> str | None:
         g = self.gripper_position
         for colour, p in self.object_positions().items():
+            if colour not in self._grasp_eq:
+                continue
             d = p - g
             if abs(d[0]) < 0.035 and abs(d[1]) < 0.03 and -0.075 < d[2] < -0.02:
                 return colour

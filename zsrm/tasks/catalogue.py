@@ -39,12 +39,12 @@ SINGLE_TASKS: dict[str, CatalogueEntry] = {
         CatalogueEntry("stack", TABLETOP_ID, "a yellow block on top of a red block"),
         CatalogueEntry("place_right", TABLETOP_ID, "a yellow block on the right of a red block"),
         CatalogueEntry("place_left", TABLETOP_ID, "a yellow block on the left of a red block"),
-        # One task for each further relation of Table 1 the tabletop can show (inside of needs a
-        # container the scene does not have yet).
+        # One task for each further relation of Table 1 (inside of: into the tabletop's open box).
         CatalogueEntry("place_below", TABLETOP_ID, "a red block below a yellow block"),
         CatalogueEntry("place_between", TABLETOP_ID, "a yellow block in between a red block and a green block"),
         CatalogueEntry("place_front", TABLETOP_ID, "a yellow block in front of a red block"),
         CatalogueEntry("place_behind", TABLETOP_ID, "a yellow block behind a red block"),
+        CatalogueEntry("place_inside", TABLETOP_ID, "a yellow block inside of a box"),
         CatalogueEntry("pendulum", PENDULUM_ID, "an inverted pendulum standing upright"),
     )
 }

@@ -28,7 +28,7 @@ import difflib
 import re
 from dataclasses import dataclass
 
-from zsrm.tasks.lexicon import (ADJECTIVES, COLOURS, DETERMINERS, EACH_OTHER, LEAD_WORDS, LINK_FILLERS, NEGATIONS,
+from zsrm.tasks.lexicon import (ADJECTIVES, COLOURS, CONTAINER_WORDS, CONTAINERS, DETERMINERS, EACH_OTHER, LEAD_WORDS, LINK_FILLERS, NEGATIONS,
                                 OTHER_COLOURS, PLACING_VERBS, POSSESSIVE_LINK, POSSESSIVE_SIDES, POSSESSIVE_TAIL,
                                 QUANTIFIERS, RELATION_PATTERNS, RELATION_WORDS, SELF_WORDS, SHAPE_WORDS, SHAPES,
                                 TAIL_WORDS)
@@ -56,7 +56,8 @@ class GoalError(ValueError):
 
 @dataclass(frozen=True)
 class Task:
-    """A spatial goal: ``relation`` over ``objects`` (colours), all of one ``shape``."""
+    """A spatial goal: ``relation`` over ``objects`` (colours, or the tabletop's "box"), the
+    coloured ones all of one ``shape``."""
 
     relation: str
     objects: tuple[str, ...]
@@ -66,11 +67,13 @@ class Task:
         object.__setattr__(self, "objects", tuple(self.objects))
         if self.relation not in RELATIONS:
             raise GoalError(f"unknown relation {self.relation!r}; known relations: {', '.join(RELATIONS)}")
-        for colour in self.objects:
-            if colour not in COLOURS:
-                raise GoalError(f"unknown colour {colour!r}; known colours: {', '.join(COLOURS)}")
         if self.shape not in SHAPES:
             raise GoalError(f"unknown object {self.shape!r}; known objects: {', '.join(SHAPES)}")
+        for colour in self.objects:
+            if colour in CONTAINERS and self.shape != "block":
+                raise GoalError(f"the {colour} is on the tabletop, with blocks, not with {self.shape}s")
+            if colour not in COLOURS and colour not in CONTAINERS:
+                raise GoalError(f"unknown colour {colour!r}; known colours: {', '.join(COLOURS)}")
         arity = RELATIONS[self.relation].arity
         if len(self.objects) != arity:
             raise GoalError(f"{self.relation} relates {arity} objects, got {len(self.objects)}")
@@ -80,7 +83,7 @@ class Task:
     @property
     def text(self) -> str:
         """The canonical goal sentence."""
-        names = [f"a {c} {self.shape}" for c in self.objects]
+        names = [f"a {p}" for p in self.phrases]
         rel = RELATIONS[self.relation]
         if rel.arity == 3:
             return f"{names[0]} {rel.phrase} {names[1]} and {names[2]}"
@@ -89,7 +92,7 @@ class Task:
     @property
     def phrases(self) -> tuple[str, ...]:
         """Noun phrases of the objects, as Grad-CAM reads them ("red block")."""
-        return tuple(f"{c} {self.shape}" for c in self.objects)
+        return tuple(c if c in CONTAINERS else f"{c} {self.shape}" for c in self.objects)
 
     @property
     def scene(self) -> str:
@@ -127,8 +130,8 @@ def _pattern_words(patterns) -> set[str]:
 
 
 VOCABULARY = frozenset(
-    set(COLOURS) | OTHER_COLOURS | set(SHAPE_WORDS) | DETERMINERS | ADJECTIVES | SELF_WORDS | NEGATIONS
-    | LINK_FILLERS | LEAD_WORDS | TAIL_WORDS | QUANTIFIERS | set(POSSESSIVE_SIDES) | {"and", "'s", "each"}
+    set(COLOURS) | OTHER_COLOURS | set(SHAPE_WORDS) | set(CONTAINER_WORDS) | DETERMINERS | ADJECTIVES | SELF_WORDS
+    | NEGATIONS | LINK_FILLERS | LEAD_WORDS | TAIL_WORDS | QUANTIFIERS | set(POSSESSIVE_SIDES) | {"and", "'s", "each"}
     | _pattern_words([p for ps in RELATION_PATTERNS.values() for p in ps] + [POSSESSIVE_LINK, POSSESSIVE_TAIL])
 )
 _FILLERS = "|".join(sorted(LINK_FILLERS | {"please"}))
@@ -200,6 +203,8 @@ def _mention_at(tokens: list[str], i: int) -> _Mention | None:
     w = _tok(tokens, j)
     if w in SELF_WORDS:
         return _Mention([], None, i, j + 1, self_ref=True)
+    if w in CONTAINER_WORDS:  # "the box": the container is its own name, it has no colour
+        return _Mention([CONTAINER_WORDS[w]], None, i, j + 1)
     if not _is_colour(tokens, j):
         has_det = j > i
         if w in SHAPE_WORDS and (has_det or w not in ("one", "ones")):
@@ -210,7 +215,7 @@ def _mention_at(tokens: list[str], i: int) -> _Mention | None:
         return _Mention([], " ".join(tokens[j:end]), i, end) if end > j else None  # "the table": unknown
     colours, j = _colour_list(tokens, j)
     noun = _tok(tokens, j)
-    if noun is None or (noun in VOCABULARY and noun not in SHAPE_WORDS):
+    if noun is None or (noun in VOCABULARY and noun not in SHAPE_WORDS and noun not in CONTAINER_WORDS):
         return _Mention(colours, None, i, j)  # a bare colour: "stack red on blue"
     return _Mention(colours, noun, i, j + 1)
 
@@ -248,15 +253,16 @@ def _replaced(tokens: list[str], swaps: dict[str, str | None]) -> list[str] | No
 def _check_objects(tokens: list[str], mentions: list[_Mention]) -> str:
     """The shape the objects share; _Refusal for anything wrong with the objects themselves."""
     colours = [c for m in mentions for c in m.colours]
-    unknown = [c for c in colours if c not in COLOURS]
+    _check_container(tokens, mentions)
+    unknown = [c for c in colours if c not in COLOURS and c not in CONTAINERS]
     if unknown:
         raise _Refusal("unknown colour", f"unknown colour {_quote(unknown[0])}", f"known colours: {', '.join(COLOURS)}",
                        _replaced(tokens, {c: _closest(c, COLOURS) for c in unknown}))
     nouns = [m.noun for m in mentions if m.noun is not None and m.noun not in SHAPE_WORDS]
     if nouns:
         raise _Refusal("unknown object", f"unknown object {_quote(nouns[0])}",
-                       f"known objects: {', '.join(SHAPES)} (also cube, object, one)",
-                       _replaced(tokens, {n: _closest(n, ("block", "cube", "puck")) or "object" for n in nouns}))
+                       f"known objects: {', '.join(SHAPES)} (also cube, object, one), box",
+                       _replaced(tokens, {n: _closest(n, ("block", "cube", "puck", "box")) or "object" for n in nouns}))
     colourless = next((m for m in mentions if not m.colours and not m.self_ref), None)
     if colourless is not None:
         raise _Refusal("no colour", f"{_quote(' '.join(tokens[colourless.start:colourless.end]))} names no colour",
@@ -269,13 +275,26 @@ def _check_objects(tokens: list[str], mentions: list[_Mention]) -> str:
                        fix=_replaced(tokens, swaps))
     twice = next((c for i, c in enumerate(colours) if c in colours[:i]), None)
     if twice or any(m.self_ref for m in mentions):
-        got = f"the {twice} one twice" if twice else f"the {mentions[0].phrase} and itself"
+        got = (f"the {twice} twice" if twice in CONTAINERS else f"the {twice} one twice") if twice \
+            else f"the {mentions[0].phrase} and itself"
         raise _Refusal("same object", f"a goal must name different objects, got {got}")
     if len(colours) < 2:
         what = f"only one object ({mentions[0].phrase})" if colours else "no coloured block or puck"
         raise _Refusal("one object" if colours else "no object", what,
                        "a goal relates two objects (three for in between)")
     return shapes.pop() if shapes else "block"
+
+
+def _check_container(tokens: list[str], mentions: list[_Mention]) -> None:
+    """_Refusal for a box with a colour ("the red box") or beside pucks (it is on the tabletop)."""
+    coloured = next((m for m in mentions if m.noun in CONTAINER_WORDS), None)
+    if coloured is not None:
+        raise _Refusal("unknown object", f"{_quote(' '.join(tokens[coloured.start:coloured.end]))}: the box has "
+                       "no colour", "name it 'the box'", tokens[:coloured.start] + ["the", "box"] + tokens[coloured.end:])
+    pucks = any(m.noun and SHAPE_WORDS.get(m.noun) == "puck" for m in mentions)
+    if pucks and any(c in CONTAINERS for m in mentions for c in m.colours):
+        raise _Refusal("mixed objects", "the box is on the tabletop, with blocks, not with pucks",
+                       fix=_replaced(tokens, {"puck": "block", "pucks": "blocks"}))
 
 
 def _link_relation(link: str) -> str | None:

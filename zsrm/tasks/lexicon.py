@@ -5,8 +5,8 @@ Data only. A goal sentence is read as
     [lead words] OBJECT link OBJECT [and OBJECT] [tail words]
 
 where an OBJECT is "[a|an|the] COLOUR [block|cube|puck|object|one]" (or several colours
-with one plural noun, "the red and blue blocks"), and a link is some filler words then
-exactly one relation phrase ("should be | right | on top of"). Every word of the sentence
+with one plural noun, "the red and blue blocks") or "[a|the] box", and a link is some
+filler words then exactly one relation phrase ("should be | right | on top of"). Every word of the sentence
 must have a place in that pattern; a sentence with a word that has none is refused.
 """
 from __future__ import annotations
@@ -26,6 +26,10 @@ SHAPE_WORDS = {
     "puck": "puck", "pucks": "puck",
     "object": None, "objects": None, "one": None, "ones": None,
 }
+# The tabletop's one open box. It has no colour, so a goal names it by its noun alone ("put the
+# red block into the box"); in a Task it is the object "box", beside the colours.
+CONTAINERS = ("box",)
+CONTAINER_WORDS = {"box": "box", "container": "box"}
 DETERMINERS = frozenset({"a", "an", "the"})
 # Words between the determiner and the colour that change nothing (all blocks are alike).
 ADJECTIVES = frozenset({"small", "little", "tiny", "big", "large"})

@@ -44,7 +44,9 @@ IMPLIED_BY = {"in_between": frozenset({"left_of", "right_of"}), "inside_of": fro
 # negative of close to.
 COMPLEMENTS = {"close_to": ("far_from", "far from")}
 COMPLEMENT_CAMERA = {name: RELATIONS[rel].camera for rel, (name, _) in COMPLEMENTS.items()}
-_COMPLEMENT_RE = {name: re.compile(rf"^a (\w+) (\w+) {words} a (\w+) (\w+)$") for name, words in COMPLEMENTS.values()}
+# An object phrase: "red block", or the box (one word).
+_PHRASE = r"(\w+(?: \w+)?)"
+_COMPLEMENT_RE = {name: re.compile(rf"^a {_PHRASE} {words} a {_PHRASE}$") for name, words in COMPLEMENTS.values()}
 
 
 def complement_text(task: Task) -> str | None:
@@ -112,8 +114,8 @@ def complement_of(caption: str) -> Task | None:
     for relation, (name, _) in COMPLEMENTS.items():
         m = _COMPLEMENT_RE[name].match(caption)
         if m:
-            colour_a, shape_a, colour_b, shape_b = m.groups()
-            return Task(relation, (colour_a, colour_b), shape_a)
+            (a, *shape_a), (b, *shape_b) = (p.split() for p in m.groups())
+            return Task(relation, (a, b), (shape_a or shape_b or ["block"])[0])
     return None
 
 
