@@ -31,8 +31,9 @@ SHAPE_WORDS = {
 CONTAINERS = ("box",)
 CONTAINER_WORDS = {"box": "box", "container": "box"}
 DETERMINERS = frozenset({"a", "an", "the"})
-# Words between the determiner and the colour that change nothing (all blocks are alike).
-ADJECTIVES = frozenset({"small", "little", "tiny", "big", "large"})
+# Words between the determiner and the colour (or "box") that change nothing: all blocks are alike,
+# and there is one box, an open one.
+ADJECTIVES = frozenset({"small", "little", "tiny", "big", "large", "open"})
 SELF_WORDS = frozenset({"itself", "themselves"})
 # Counting words: "two blocks" names blocks but not which ones.
 QUANTIFIERS = frozenset({"two", "three", "four", "both", "all", "every", "some", "any", "other", "another"})
