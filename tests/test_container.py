@@ -77,12 +77,16 @@ def test_the_scripted_controller_drops_the_block_into_the_box():
         assert pos["yellow"][2] < TABLE_TOP + 2 * BOX_HALF_HEIGHT  # in the box, not held above it
 
 
-def test_exploration_scenes_can_hold_the_box_clear_of_the_blocks():
+def test_exploration_scenes_can_hold_the_box_clear_of_the_blocks_or_with_one_in_it():
     env = TabletopEnv(task=None, objects=("red", "green", "box"), image_size=16)
     for seed in range(5):
-        _, info = env.reset(seed=seed)
+        _, info = env.reset(seed=seed, options={"p_stack": 0.0, "p_side": 1.0})
         pos = info["object_positions"]
         assert all(np.max(np.abs(pos[c][:2] - pos["box"][:2])) > BOX_HALF + BLOCK_HALF for c in ("red", "green"))
+    env = TabletopEnv(task=None, objects=("box", "red"), image_size=16)
+    env.reset(seed=0, options={"p_stack": 1.0})  # red starts over the box's opening
+    _settle(env)
+    assert holds_in_world("inside_of", [env.object_positions()["red"], env.object_positions()["box"]])
     with pytest.raises(GoalError, match="known colours"):
         make_env("push_close", objects=("box",))
 

@@ -179,8 +179,8 @@ class MujocoPixelEnv(gym.Env):
             for _ in range(100):
                 layout = self._random_layout(**(options or {}))
                 if self._layout_ok(layout):
-                    break
-            return layout
+                    return layout
+            raise RuntimeError(f"could not sample an exploration scene of {', '.join(self.objects)}")
         rel = self.task.relation
         for _ in range(1000):
             layout = self._initial_layout()
@@ -213,16 +213,17 @@ class MujocoPixelEnv(gym.Env):
         """Exploration: objects anywhere on the table; with probability ``p_stack`` a block
         starts stacked on another, with ``p_side`` an object starts beside another (centres 2
         to 3 half-widths apart). Random actions alone rarely bring two objects together, so
-        without these, exploration data would hardly show "on top of" or touching objects."""
+        without these, exploration data would hardly show "on top of" or touching objects.
+        A container is never stacked nor placed beside; a block stacked on it falls in."""
         rng, h = self.np_random, self.object_half_size
         layout: dict[str, np.ndarray] = {}
         for colour in self.objects:
-            if layout and self.shape == "block" and rng.random() < p_stack:
+            if layout and self.shape == "block" and colour not in self.containers and rng.random() < p_stack:
                 base = layout[list(layout)[rng.integers(len(layout))]]
                 if not any(np.allclose(p[:2], base[:2]) and p[2] > base[2] for p in layout.values()):
                     layout[colour] = base + (*rng.uniform(-0.3 * h, 0.3 * h, 2), 2 * h)
                     continue
-            if layout and rng.random() < p_side:
+            if layout and colour not in self.containers and rng.random() < p_side:
                 base = layout[list(layout)[rng.integers(len(layout))]]
                 for _ in range(100):  # directions that stay on the table and clear of the others
                     angle, dist = rng.uniform(0, 2 * np.pi), rng.uniform(2.05 * h, 3.0 * h)

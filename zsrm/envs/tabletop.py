@@ -100,12 +100,17 @@ class TabletopEnv(MujocoPixelEnv):
         return layout
 
     def _layout_ok(self, layout) -> bool:
-        """Every block starts clear of the box's walls (a 1 cm gap), never in or on it."""
+        """Every block starts clear of the box's walls (a 1 cm gap), or (exploration scenes that
+        stack a block on the box) above its opening, to fall in."""
         if "box" not in layout:
             return True
         box = layout["box"]
-        clear = BOX_HALF + BLOCK_HALF + 0.01
-        return all(np.max(np.abs(p[:2] - box[:2])) > clear for c, p in layout.items() if c != "box")
+
+        def ok(p):
+            d = np.max(np.abs(p[:2] - box[:2]))
+            above = p[2] > TABLE_TOP + 2 * BOX_HALF_HEIGHT + BLOCK_HALF and d < BOX_INNER_HALF - BLOCK_HALF
+            return d > BOX_HALF + BLOCK_HALF + 0.01 or above
+        return all(ok(p) for c, p in layout.items() if c != "box")
 
     def _set_object(self, colour: str, xyz):
         if colour in CONTAINERS:  # fixed to the world: move the body, standing on the table
