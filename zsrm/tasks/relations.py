@@ -42,7 +42,8 @@ class Thresholds:
         return replace(self, **{k: v * factor for k, v in self.__dict__.items()})
 
 
-# Metres, for the tabletop's 6 cm blocks and the pushing scene's 7 cm pucks.
+# Metres, for the tabletop's 6 cm blocks and the pushing scene's 7 cm pucks; a block in the
+# tabletop's open box is at most 1.7 cm from the box's centre (inside < 2 cm).
 WORLD_THRESHOLDS = Thresholds(gap=0.01, eps_x=0.03, eps_y=0.09, close=0.10, inside=0.02)
 
 
