@@ -58,3 +58,23 @@ def test_report_renders_in_a_headless_browser(tiny_report, tmp_path):
     assert loaded, "the page's load script did not run"
     ok, total = map(int, loaded.groups())
     assert total >= 3 and ok == total, f"{total - ok} of {total} figures did not load"
+
+
+def test_tiny_cpu_scale_runs_every_stage(tmp_path):
+    """The cpu scale's whole chain (pretrain, label, student, Ray sweep, task policies, rollouts,
+    distill, Table 2) at a tiny size: every stage finishes and the report shows the run's own results."""
+    report, workdir = tmp_path / "report", tmp_path / "work"
+    Reproduce(scale="tiny-cpu", workdir=str(workdir), report=str(report)).run()
+    stages = ("vlm", "data", "student", "policies", "task_policies", "rollouts", "distill", "table2")
+    for stage in stages:
+        assert json.loads((workdir / stage / "stage.json").read_text())["stage"] == stage
+    learning = json.loads((workdir / "policies" / "learning.json").read_text())
+    assert set(learning["place_right"]) == {"oracle", "zsrm", "random"}
+    table = json.loads((workdir / "table2" / "table2.json").read_text())
+    for policy in ("language", "primitive", "none"):
+        assert {"mean", "se"} <= set(table[policy]["seen"]["test"])
+    page = (report / "index.html").read_text()
+    assert "What this run trained" in page
+    for src in re.findall(r'<img class="figure" src="([^"]+)"', page):
+        with Image.open(report / src) as img:
+            img.verify()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import platform
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from zsrm.pipeline import narrow
 from zsrm.pipeline.learn import Sweep
@@ -42,11 +42,13 @@ class MultitaskPolicies:
     address: str | None = None  # a Ray cluster to join instead (auto, or ray://HOST:PORT)
     reward_model: str = "student"  # the zsrm reward's model folder, or student (the shipped one)
     out: str = "results/multitask/policies.json"  # the gathered summary (trials kept beside it in trials/)
+    vlm: str = "scene"  # the VLM whose image trunk the policies read
+    train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
     def run(self) -> int:
         return Sweep(tasks=tuple(train_goals(self.tasks)), rewards=("zsrm",), seeds=(self.seed,), root=self.root,
-                     steps=self.steps, num_cpus=self.num_cpus, address=self.address,
-                     reward_model=self.reward_model, out=self.out).run()
+                     steps=self.steps, num_cpus=self.num_cpus, address=self.address, vlm=self.vlm,
+                     reward_model=self.reward_model, out=self.out, train=self.train).run()
 
 
 @dataclass

@@ -90,6 +90,8 @@ class Sweep:
     reward_model: str = "student"  # the zsrm reward's model folder, or student (the shipped one)
     out: str = "results/rl/learning.json"  # the gathered summary; the plot beside it (.png), trials in trials/
     gather_only: bool = False  # train nothing: gather the trials finished so far (e.g. while a sweep runs)
+    vlm: str = "scene"  # the VLM whose image trunk the policies read (a folder pretrained by zsrm pretrain-vlm)
+    train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
     def run(self) -> int:
         from zsrm.evaluation.learning_curves import plot_learning_curves
@@ -100,7 +102,7 @@ class Sweep:
             raise ValueError(f"unknown rewards {', '.join(sorted(unknown))}; choose from {', '.join(REWARDS)}")
         check_writable(self.root, folder=True)
         check_writable(self.out)
-        overrides = {"steps": self.steps, "reward_model": self.reward_model}
+        overrides = {**self.train, "steps": self.steps, "reward_model": self.reward_model, "vlm": self.vlm}
         out = Path(self.out)
         if not self.gather_only:
             ran = sweep(self.root, self.tasks, self.rewards, self.seeds, overrides, num_cpus=self.num_cpus,

@@ -52,6 +52,11 @@ class Report:
         body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>" for r in rows)
         self.html.append(f"<table><tr>{cells}</tr>{body}</table>")
 
+    def markdown_block(self, text: str):
+        """Markdown written elsewhere (a table): as is in README.md, preformatted in the HTML."""
+        self.md += [text, ""]
+        self.html.append(f"<pre>{html.escape(text)}</pre>")
+
     def figure(self, source: Path, caption: str):
         """Copy ``source`` into the report's figures/ and show it."""
         if not source.is_file():
@@ -105,6 +110,8 @@ def write_report(folder: Path, scale: str, vlm: str, log: list[dict], workdir: P
         result = demo_result(log, wall_s, SCALES[scale]["task"])
         write_json(RESULTS / "demo.json" if scale == "demo" else folder / "demo.json", result)
         demo_section(report, result, workdir)
+    else:
+        run_section(report, workdir)
     committed_results(report)
     return report.write(f"zsrm report ({scale} scale)")
 
@@ -138,6 +145,20 @@ def demo_section(report: Report, result: dict, workdir: Path):
     report.command(f"zsrm train --goal {task} --reward zsrm --seed 0 --steps {result['zsrm_policy_env_steps']}")
 
 
+def run_section(report: Report, workdir: Path):
+    """What a cpu or paper run built: its Figure 6 sweep and its Table 2."""
+    report.heading("What this run trained")
+    learning = workdir / "policies" / "learning.json"
+    if learning.is_file():
+        learning_table(report, json.loads(learning.read_text()))
+        report.figure(learning.with_suffix(".png"), "this run: oracle episode reward while training, mean and s.e. "
+                                                    "over seeds")
+    table2 = workdir / "table2" / "table2.json"
+    if table2.is_file():
+        report.markdown_block(table2.with_suffix(".md").read_text())
+        report.figure(table2.with_suffix(".png"), "this run: Table 2, the distilled policies")
+
+
 def _load(name: str):
     path = RESULTS / name
     return json.loads(path.read_text()) if path.is_file() else None
@@ -166,10 +187,11 @@ def committed_results(report: Report):
     learning_section(report)
     report.heading("Multi-task policy (Table 2)", 3)
     if (RESULTS / "table2.md").is_file():
-        report.md += [(RESULTS / "table2.md").read_text(), ""]
+        report.markdown_block((RESULTS / "table2.md").read_text())
         report.figure(RESULTS / "table2.png", "Table 2: language, primitive-code and unconditioned policies")
     else:
-        report.text("Not produced yet: the distillation stage (zsrm distill, issue 14) has not landed.")
+        report.text("Not produced yet at the cpu scale: the 18 task policies of Table 2 (zsrm multitask-policies, "
+                    "then multitask-rollouts, distill, eval-multitask) have not been run on this machine.")
 
 
 def learning_section(report: Report):
@@ -178,8 +200,12 @@ def learning_section(report: Report):
     if not learning:
         report.text("No sweep results committed yet (zsrm sweep writes results/rl/learning.json).")
         return
+    learning_table(report, learning)
+    report.figure(RESULTS / "rl" / "learning.png", "oracle episode reward while training, mean and s.e. over seeds")
+    report.command(learning.get("meta", {}).get("command", "zsrm sweep"))
+
+
+def learning_table(report: Report, learning: dict):
     rows = [[task, reward, f"{v['final_mean']:.1f}", f"{v['final_se']:.1f}", v["seeds"], v["steps"]]
             for task, rewards in learning.items() if task != "meta" for reward, v in rewards.items()]
     report.table(["task", "reward", "oracle episode reward", "s.e. over seeds", "seeds", "env steps"], rows)
-    report.figure(RESULTS / "rl" / "learning.png", "oracle episode reward while training, mean and s.e. over seeds")
-    report.command(learning.get("meta", {}).get("command", "zsrm sweep"))
