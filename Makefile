@@ -33,7 +33,9 @@ results: setup
 	cp runs/zsrm/student/config.json runs/zsrm/student/model.safetensors runs/zsrm/student/training.json \
 		zsrm/fullmodel/weights/student/
 	$(VENV)/bin/zsrm finetune --data data/zsrm/explore --out runs/zsrm/vlm
-	$(VENV)/bin/zsrm eval-reward --zsrm runs/zsrm/vlm --compare student=runs/zsrm/student --out results/reward_eval.json
+	$(VENV)/bin/zsrm eval-reward --zsrm student --compare finetuned_vlm=runs/zsrm/vlm \
+		--tasks stack place_left place_right push_close place_below place_between place_front place_behind place_inside \
+		--out results/reward_eval.json
 	$(PY) benchmarks/reward_speed.py --vlm runs/zsrm/vlm --student runs/zsrm/student --out results/reward_speed.json
 	OMP_NUM_THREADS=1 $(PY) benchmarks/robustness.py --out results/robustness.json
 	OMP_NUM_THREADS=1 $(PY) benchmarks/ppo_speed.py --steps 8192 --out results/ppo_speed.json

@@ -180,10 +180,11 @@ def committed_results(report: Report):
     for task in ("stack", "place_right", "push_close"):
         report.figure(RESULTS / "reward_curves" / f"{task}.png", f"base and zsrm reward along {task} episodes")
     reward = _load("reward_eval.json") or {}
-    rows = [[task, *(f"{reward.get(m, {}).get(task, {}).get('f1', float('nan')):.2f}" for m in ("zsrm", "student", "base"))]
-            for task in ("stack", "place_left", "place_right", "push_close")]
-    report.table(["task", "zsrm F1 (fine-tuned VLM)", "student F1", "base F1"], rows)
-    report.command("zsrm eval-reward --zsrm runs/zsrm/vlm --compare student=runs/zsrm/student --out results/reward_eval.json")
+    models = [m for m in reward if m != "meta"]
+    tasks = list(reward.get("zsrm", {}))
+    rows = [[task, *(f"{reward[m].get(task, {}).get('f1', float('nan')):.2f}" for m in models)] for task in tasks]
+    report.table(["task", *(f"{m} F1" for m in models)], rows)
+    report.command(reward.get("meta", {}).get("command", "zsrm eval-reward"))
     learning_section(report)
     report.heading("Multi-task policy (Table 2)", 3)
     if (RESULTS / "table2.md").is_file():
