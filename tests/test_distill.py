@@ -1,6 +1,7 @@
 """The multi-task policy (paper 2.3, 3.3, Table 2): rollout data without blue, the nearest
 primitive code, the three policies, and a tiny end to end run of the four commands."""
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,8 @@ from zsrm.rl import TrainConfig, train
 from zsrm.rl.envs import make_vec
 from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
 from zsrm.tasks.language import parse_goal
+from zsrm.testing import hostile as H
+from zsrm.vlm.files import ZsrmFileError
 from zsrm.vlm.scene import SceneConfig
 
 TINY = dict(steps=256, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, eval_every=128,
@@ -165,3 +168,25 @@ def test_docstring_examples():
 
     result = doctest.testmod(zsrm.policy.models)
     assert result.attempted > 0 and result.failed == 0
+
+
+@pytest.mark.parametrize("damage", [*H.WEIGHT_DAMAGE, "pickle", "config_a_list", "config_unknown_key"])
+def test_a_damaged_distilled_policy_is_one_line_naming_the_file(pipeline, damage, tmp_path):
+    """The distilled policies load through the registry: damage is refused before any weight is read."""
+    folder = tmp_path / "language"
+    shutil.copytree(pipeline / "distill" / "language", folder)
+    weights, config, marker = folder / "model.safetensors", folder / "config.json", tmp_path / "code-ran"
+    if damage == "pickle":
+        H.write_pickle_bomb(weights, marker)
+    elif damage in H.WEIGHT_DAMAGE:
+        H.WEIGHT_DAMAGE[damage](weights)
+    elif damage == "config_a_list":
+        config.write_text("[1, 2]")
+    else:
+        config.write_text(json.dumps({**json.loads(config.read_text()), "surprise": 1}))
+    with pytest.raises(ZsrmFileError) as err:
+        load_policy(folder)
+    message = str(err.value)
+    assert "\n" not in message.strip()
+    assert str(config if damage.startswith("config") else weights) in message
+    assert not marker.exists()
