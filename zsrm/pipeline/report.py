@@ -140,8 +140,14 @@ def demo_section(report: Report, result: dict, workdir: Path):
                      "random": {"curve": [], "seeds": 1, "final_mean": rand["final_mean"], "final_se": rand["final_se"]}}}
     png = plot_learning_curves(curves, workdir / "gifs" / "demo_learning.png")
     report.figure(png, "oracle episode reward of the zsrm-trained policy while it trains (s.e. over evaluation episodes)")
-    report.figure(workdir / "gifs" / "zsrm_policy.gif", "one episode of the policy trained with the zsrm reward")
-    report.figure(workdir / "gifs" / "random_policy.gif", "one episode of a random policy")
+    gifs = json.loads((workdir / "gifs" / "stage.json").read_text())["result"]
+    picked = ("the first of seeds 0-9 in which it reaches the goal" if gifs["zsrm_episode_reward"] > 0
+              else "it reached the goal in none of seeds 0-9")
+    report.figure(workdir / "gifs" / "zsrm_policy.gif",
+                  f"the policy trained with the zsrm reward, seed {gifs.get('seed', 0)} ({picked}; oracle episode "
+                  f"reward {gifs['zsrm_episode_reward']:.0f})")
+    report.figure(workdir / "gifs" / "random_policy.gif",
+                  f"a random policy, same seed (oracle episode reward {gifs['random_episode_reward']:.0f})")
     report.command(f"zsrm train --goal {task} --reward zsrm --seed 0 --steps {result['zsrm_policy_env_steps']}")
 
 
