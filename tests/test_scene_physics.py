@@ -44,6 +44,26 @@ def test_random_grip_commands_hold_a_block_for_several_steps():
     assert held >= 3  # a plain sign test released it after about one step
 
 
+@pytest.mark.parametrize("seed", range(5))
+def test_start_around_puts_open_fingers_around_the_block_one_close_grasps(seed):
+    env = TabletopEnv("stack", image_size=16, start="around")
+    env.reset(seed=seed)
+    assert env.held is None and not env.closed  # the fingers start open
+    env.step(np.array([0, 0, 1.0]))
+    assert env.held == "yellow"
+    with pytest.raises(ValueError, match="start"):
+        TabletopEnv("stack", image_size=16, start="inside")
+
+
+def test_start_is_written_only_when_changed():
+    """Runs committed before the start setting existed keep matching their configuration."""
+    from zsrm.rl.config import TrainConfig
+
+    assert "start" not in TrainConfig().to_dict() and "start" not in TrainConfig().identity()
+    assert TrainConfig(start="around").to_dict()["start"] == "around"
+    assert TrainConfig.from_dict(TrainConfig(start="around").to_dict()).start == "around"
+
+
 @pytest.mark.parametrize("task", ["stack", "push_close"])
 def test_random_actions_never_throw_objects(task):
     env = gym.make("zsrm/Tabletop-v0" if task == "stack" else "zsrm/Pushing-v0", task=task, image_size=16)

@@ -53,7 +53,11 @@ class TabletopEnv(MujocoPixelEnv):
     rest_height = BLOCK_HALF
 
     def __init__(self, task="stack", cameras=("front",), image_size=64, spread="seen",
-                 action_mode: str | None = None, render_mode=None, objects=None, action_repeat: int = 1):
+                 action_mode: str | None = None, render_mode=None, objects=None, action_repeat: int = 1,
+                 start: str = "above"):
+        if start not in ("above", "around"):
+            raise ValueError(f"unknown start {start!r}; choose 'above' or 'around'")
+        self.start = start
         super().__init__(task, cameras, image_size, spread, render_mode, objects, action_repeat)
         if action_mode is None:
             planar = self.task is not None and RELATIONS[self.task.relation].camera == "front"
@@ -120,8 +124,9 @@ class TabletopEnv(MujocoPixelEnv):
 
     def _reset_agent(self):
         """Task scenes: the gripper starts open above the block the goal moves (within one block
-        width, its fingertips 1-6 cm above the block), so exploration touches it; exploration
-        scenes: anywhere above the table."""
+        width, its fingertips 1-6 cm above the block), so exploration touches it, or with
+        ``start="around"`` its open fingers around that block; exploration scenes: anywhere above
+        the table."""
         rng = self.np_random
         y = 0.0 if self.action_mode == "planar" else rng.uniform(-0.08, 0.08)
         pos = np.array([rng.uniform(-0.15, 0.15), y, rng.uniform(TABLE_TOP + 0.15, TABLE_TOP + 0.25)])
@@ -132,6 +137,10 @@ class TabletopEnv(MujocoPixelEnv):
             if self.action_mode == "full":
                 pos[1] = block[1] + rng.uniform(-BLOCK_HALF, BLOCK_HALF)
             pos[2] = block[2] + BLOCK_HALF + FINGERTIP_DROP + rng.uniform(0.01, 0.06)
+            if self.start == "around":  # open fingers around the block: closing them grasps it
+                pos[0] = block[0] + rng.uniform(-0.01, 0.01)
+                pos[1] = block[1] if self.action_mode == "full" else pos[1]
+                pos[2] = block[2] + GRASP_HEIGHT
             pos = np.clip(pos, [X_RANGE[0], Y_RANGE[0], Z_RANGE[0]], [X_RANGE[1], Y_RANGE[1], Z_RANGE[1]])
         self.data.mocap_pos[self._mocap] = pos
         self.data.qpos[self._gripper_qadr:self._gripper_qadr + 3] = pos

@@ -67,6 +67,13 @@ class TrainConfig:
     """environment steps between checkpoints a killed run resumes from"""
     threads: int = 1
     """torch threads"""
+    start: Literal["above", "around"] = "above"
+    """tabletop tasks: the gripper starts open above the block the goal moves (above), or with its
+    open fingers around it, so that closing them grasps it (around)"""
+
+    # Settings added after runs were committed: written only when changed, so that a finished
+    # run made before they existed still matches its configuration.
+    ADDED = {"start": "above"}
 
     def __post_init__(self):
         if self.reward not in REWARDS:
@@ -77,6 +84,8 @@ class TrainConfig:
                      "eval_episodes", "checkpoint_every", "threads", "keypoints"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.start not in ("above", "around"):
+            raise ValueError(f"unknown start {self.start!r}; choose above or around")
         if 100 % self.action_repeat:
             raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
 
@@ -87,13 +96,13 @@ class TrainConfig:
 
     def identity(self) -> dict:
         """The settings that define the run (a checkpoint resumes only under the same ones)."""
-        d = asdict(self)
+        d = self.to_dict()
         for k in ("steps", "eval_every", "eval_deterministic", "checkpoint_every", "threads"):
             d.pop(k)
         return d
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return {k: v for k, v in asdict(self).items() if not (k in self.ADDED and v == self.ADDED[k])}
 
     @classmethod
     def from_dict(cls, d: dict) -> "TrainConfig":

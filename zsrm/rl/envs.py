@@ -30,6 +30,8 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen") -> 
     entry = task_entry(cfg.goal)
     kwargs = dict(task=entry.goal, cameras=(goal_camera(cfg.goal),), image_size=cfg.image_size,
                   spread=spread, action_repeat=cfg.action_repeat)
+    if cfg.start != "above":  # a tabletop setting; the pushing scene refuses it
+        kwargs["start"] = cfg.start
     decisions = EPISODE_STEPS // cfg.action_repeat
     venv = DummyVecEnv([lambda: gym.make(entry.env_id, max_episode_steps=decisions, **kwargs)
                         for _ in range(n_envs)])
