@@ -59,9 +59,16 @@ def test_start_is_written_only_when_changed():
     """Runs committed before the start setting existed keep matching their configuration."""
     from zsrm.rl.config import TrainConfig
 
-    assert "start" not in TrainConfig().to_dict() and "start" not in TrainConfig().identity()
-    assert TrainConfig(start="around").to_dict()["start"] == "around"
-    assert TrainConfig.from_dict(TrainConfig(start="around").to_dict()).start == "around"
+    place = TrainConfig(goal="place_right")
+    assert place.start == "above" and "start" not in place.to_dict() and "start" not in place.identity()
+    assert TrainConfig(goal="place_right", start="around").to_dict()["start"] == "around"
+    # stacking goals start around the block unless told otherwise, and say so in their config
+    assert TrainConfig(goal="a red block on top of a green block").to_dict()["start"] == "around"
+    assert TrainConfig.from_dict({**TrainConfig(goal="stack").to_dict(), "start": "above"}).start == "above"
+    with pytest.raises(ValueError, match="pushing"):
+        from zsrm.rl.envs import make_vec
+
+        make_vec(TrainConfig(goal="push_close", start="around"), 1, 0)
 
 
 @pytest.mark.parametrize("task", ["stack", "push_close"])

@@ -67,9 +67,10 @@ class TrainConfig:
     """environment steps between checkpoints a killed run resumes from"""
     threads: int = 1
     """torch threads"""
-    start: Literal["above", "around"] = "above"
+    start: Literal["auto", "above", "around"] = "auto"
     """tabletop tasks: the gripper starts open above the block the goal moves (above), or with its
-    open fingers around it, so that closing them grasps it (around)"""
+    open fingers around it, so that closing them grasps it (around); auto: around for stacking
+    goals (on top of, below), whose oracle reward stayed 0 for 300k steps from above, else above"""
 
     # Settings added after runs were committed: written only when changed, so that a finished
     # run made before they existed still matches its configuration.
@@ -84,8 +85,10 @@ class TrainConfig:
                      "eval_episodes", "checkpoint_every", "threads", "keypoints"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.start not in ("above", "around"):
-            raise ValueError(f"unknown start {self.start!r}; choose above or around")
+        if self.start not in ("auto", "above", "around"):
+            raise ValueError(f"unknown start {self.start!r}; choose auto, above or around")
+        if self.start == "auto":
+            self.start = "around" if goal_relation(self.goal) in STACKING else "above"
         if 100 % self.action_repeat:
             raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
 
@@ -111,6 +114,18 @@ class TrainConfig:
         if unknown:
             raise ValueError(f"unknown training settings: {', '.join(sorted(unknown))}")
         return cls(**d)
+
+
+# Relations whose tasks start with the moved block in the open fingers (start "auto").
+STACKING = ("on_top_of", "below")
+
+
+def goal_relation(goal: str) -> str | None:
+    """The relation of a goal sentence or catalogue task (None for the pendulum)."""
+    from zsrm.tasks.catalogue import resolve
+
+    task = resolve(goal).task
+    return task.relation if task is not None else None
 
 
 PRESETS: dict[str, dict] = {

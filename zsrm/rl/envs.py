@@ -7,7 +7,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 import zsrm.envs  # noqa: F401  (registers the scenes)
 from zsrm.rl.config import TrainConfig
-from zsrm.tasks.catalogue import PENDULUM_ID, CatalogueEntry, resolve
+from zsrm.tasks.catalogue import PENDULUM_ID, TABLETOP_ID, CatalogueEntry, resolve
 from zsrm.tasks.relations import RELATIONS
 
 EPISODE_STEPS = 100
@@ -30,7 +30,9 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen") -> 
     entry = task_entry(cfg.goal)
     kwargs = dict(task=entry.goal, cameras=(goal_camera(cfg.goal),), image_size=cfg.image_size,
                   spread=spread, action_repeat=cfg.action_repeat)
-    if cfg.start != "above":  # a tabletop setting; the pushing scene refuses it
+    if cfg.start != "above":
+        if entry.env_id != TABLETOP_ID:
+            raise ValueError(f"start {cfg.start!r} is for the tabletop's blocks; {cfg.goal!r} is a pushing task")
         kwargs["start"] = cfg.start
     decisions = EPISODE_STEPS // cfg.action_repeat
     venv = DummyVecEnv([lambda: gym.make(entry.env_id, max_episode_steps=decisions, **kwargs)
