@@ -46,7 +46,8 @@ def plot_learning_curves(summary: dict, path: str | Path, title: str = "") -> Pa
         ax.set_xlabel("env steps")
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("oracle episode reward (of 100)")
-    axes[0][-1].legend(fontsize=8, loc="upper left")
+    for ax in axes[0]:  # each panel lists its own rewards and seeds (they differ while a sweep runs)
+        ax.legend(fontsize=7, loc="upper left")
     if title:
         fig.suptitle(title)
     return save_figure(fig, path)
