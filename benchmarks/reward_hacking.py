@@ -1,0 +1,86 @@
+"""Where a policy trained with the zsrm reward collects reward the oracle does not give.
+
+Rolls out a saved policy (``zsrm train``) on seeded evaluation episodes and scores every
+decision with both the zsrm reward (the policy's own training reward) and the oracle. For the
+frames where they disagree it reports the goal objects' offset in the camera plane the
+relation is read on (metres: x right, y up for the front camera), beside Table 1's thresholds,
+so a reward the policy exploits shows as a geometry the oracle rejects (a block held too high
+to be "on top of", say).
+
+    python benchmarks/reward_hacking.py runs/rl/stack-zsrm-0/policy --episodes 20 \
+        --out results/rl/reward_hacking_stack.json
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import asdict, replace
+
+import numpy as np
+
+from zsrm.rewards import VecZeroShotReward
+from zsrm.rl.envs import goal_camera, make_reward, make_vec, task_entry
+from zsrm.rl.evaluate import eval_seed
+from zsrm.rl.features import VecImageFeatures
+from zsrm.rl.policy import PolicyBundle
+from zsrm.tasks.relations import RELATIONS, WORLD_THRESHOLDS, camera_plane
+from zsrm.vlm import load_vlm
+from zsrm.vlm.files import write_json
+
+
+def score_rollouts(policy: str, episodes: int) -> dict[str, np.ndarray]:
+    """Per decision: the zsrm reward, the oracle's verdict and the goal objects' plane offset."""
+    bundle = PolicyBundle.load(policy)
+    cfg = bundle.cfg
+    task = task_entry(cfg.goal).task
+    venv = VecZeroShotReward(make_vec(cfg, episodes, eval_seed(cfg.seed)), make_reward(replace(cfg, reward="zsrm")),
+                             task_entry(cfg.goal).goal)
+    venv = VecImageFeatures(venv, load_vlm(cfg.vlm), goal_camera(cfg.goal))
+    camera = RELATIONS[task.relation].camera
+    obs, rows, running = venv.reset(), [], np.ones(episodes, dtype=bool)
+    while running.any():
+        obs, rewards, dones, infos = venv.step(bundle.act(obs, deterministic=cfg.eval_deterministic))
+        for i, info in enumerate(infos):
+            if running[i]:
+                a, b = (camera_plane(info["object_positions"][c], camera) for c in task.objects[:2])
+                rows.append((rewards[i], info["is_success"], *(a - b)))
+                running[i] = not dones[i]
+    venv.close()
+    zsrm, oracle, dx, dy = np.array(rows, dtype=np.float64).T
+    return {"zsrm": zsrm > 0.5, "oracle": oracle > 0.5, "dx": dx, "dy": dy}
+
+
+def summarise(frames: dict[str, np.ndarray]) -> dict:
+    def offsets(mask):
+        if not mask.any():
+            return {"frames": 0}
+        return {"frames": int(mask.sum()), "median_abs_dx_m": float(np.median(np.abs(frames["dx"][mask]))),
+                "median_dy_m": float(np.median(frames["dy"][mask])),
+                "p90_dy_m": float(np.percentile(frames["dy"][mask], 90))}
+
+    z, o = frames["zsrm"], frames["oracle"]
+    return {"decisions": int(z.size), "zsrm_rate": float(z.mean()), "oracle_rate": float(o.mean()),
+            "both": offsets(z & o), "zsrm_only": offsets(z & ~o), "oracle_only": offsets(~z & o),
+            "neither": offsets(~z & ~o)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("policy", help="a policy folder written by zsrm train")
+    parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--out", default="results/rl/reward_hacking.json")
+    args = parser.parse_args()
+    summary = summarise(score_rollouts(args.policy, args.episodes))
+    summary["meta"] = {"policy": args.policy, "episodes": args.episodes, "thresholds": asdict(WORLD_THRESHOLDS),
+                       "offset": "first goal object minus second, in the plane of the camera the relation is "
+                                 "read on (metres)",
+                       "command": f"python benchmarks/reward_hacking.py {args.policy} --episodes {args.episodes} "
+                                  f"--out {args.out}"}
+    write_json(args.out, summary)
+    for key in ("both", "zsrm_only", "oracle_only"):
+        print(key, summary[key])
+    print(f"zsrm says yes on {summary['zsrm_rate']:.2f} of decisions, the oracle on {summary['oracle_rate']:.2f}; "
+          f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
