@@ -68,6 +68,7 @@ def test_label_resumes_after_a_kill(whole, tmp_path):
     labels = label_dataset(tmp_path, LabelConfig(vlm="testing"), vlm=ColourVLM(32), progress=False)
     _kill_after(labels, keep=2)
     label_dataset(tmp_path, LabelConfig(vlm="testing"), vlm=ColourVLM(32), progress=False)
+    assert "fine_centres" in json.loads((labels / "manifest.json").read_text())  # the resumed run reused them
     for i in range(3):
         _same_npz(whole / "labels" / f"shard_{i:05d}.npz", labels / f"shard_{i:05d}.npz")
     data, ref = ExplorationData(tmp_path), ExplorationData(whole)

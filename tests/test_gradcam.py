@@ -101,3 +101,43 @@ def test_receptive_field_centres_of_a_pooled_layer_are_its_cells():
     pixels = vlm.preprocess(np.stack([_scene(np.random.default_rng(i)) for i in range(2)]))
     np.testing.assert_allclose(receptive_field_centres(vlm, pixels, (32, 32)), grid_centres((8, 8), (32, 32)),
                                atol=1e-6)
+
+
+def test_fine_layer_cam_through_its_hook_equals_the_head_path():
+    # LayerCAM at the module that outputs the Grad-CAM layer (ColourVLM's pool), read through a
+    # hook, must equal LayerCAM computed the plain way on the trunk's output (no fine layer).
+    images = np.stack([_scene(np.random.default_rng(i)) for i in range(2)])
+    hooked, plain = GradCAM(ColourVLM(32), contrast=PHRASES), GradCAM(ColourVLM(32), contrast=PHRASES)
+    hooked.fine_layer, plain.fine_layer = "pool", None
+    a, b = hooked.fine_heatmaps(images, PHRASES), plain.fine_heatmaps(images, PHRASES)
+    assert a.shape == (2, 3, 8, 8) and a.max() > 0 and (a >= 0).all()
+    torch.testing.assert_close(a, b)
+
+
+def test_fine_locate_is_sub_pixel_where_the_coarse_map_is_not():
+    image = _scene(np.random.default_rng(3))
+    true = np.array([[8.5, 6.5], [20.5, 22.5]])  # (x, row) of the red and yellow squares' centres
+    res = {how: GradCAM(ColourVLM(32), contrast=PHRASES, locate=how, cell_centres="grid")(image[None], PHRASES[:2])
+           for how in ("peak_centroid", "fine")}
+    fine = np.linalg.norm(res["fine"].xy[0] - true, axis=-1)
+    coarse = np.linalg.norm(res["peak_centroid"].xy[0] - true, axis=-1)
+    assert (fine < 0.3).all() and fine.sum() < coarse.sum()
+    # The heat maps, peaks and scores stay Grad-CAM's.
+    np.testing.assert_array_equal(res["fine"].maps, res["peak_centroid"].maps)
+
+
+def test_fine_locate_undoes_its_mirrored_and_shifted_views():
+    # An object against the right edge: a view that lost track of it (shifted out) must not
+    # pull the average; the mirrored view must land back on the same side.
+    image = np.full((32, 32, 3), 128, np.uint8)
+    image[10:16, 26:32] = (230, 30, 30)
+    xy = GradCAM(ColourVLM(32), contrast=PHRASES, locate="fine", cell_centres="grid")(image[None], ["red block"]).xy
+    assert abs(xy[0, 0, 0] - 28.5) < 0.6 and abs(xy[0, 0, 1] - 12.5) < 0.6
+
+
+def test_locate_fraction_widens_the_blob():
+    maps = np.zeros((1, 1, 4, 4))
+    maps[0, 0, 1, 1], maps[0, 0, 1, 2] = 1.0, 0.3
+    centres = grid_centres((4, 4), (16, 16))
+    np.testing.assert_allclose(locate(maps, centres)[0, 0], centres[1, 1])
+    np.testing.assert_allclose(locate(maps, centres, fraction=0.2)[0, 0], (centres[1, 1] + 0.3 * centres[1, 2]) / 1.3)

@@ -333,7 +333,7 @@ def figure3(data_folder, vlm, out: str | Path, labels: str | Path = LABELS, inde
     idx = [COLOURS.index(c) for c in phrases]
     index, one = _one_image(data, idx, index, phrases)
     shape = SCENE_SHAPES[data.scenes[int(one["scene"][0])]]
-    grounder = Grounder(vlm, cfg, data, manifest.get("centres"))
+    grounder = Grounder(vlm, cfg, data, manifest.get("centres"), manifest.get("fine_centres"))
     grad = grounder.shard({k: v for k, v in one.items() if k.startswith("images_") or k == "scene"})
     size = data.config["image_size"]
 

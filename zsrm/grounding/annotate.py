@@ -44,7 +44,7 @@ class LabelConfig:
 
     vlm: str = DEFAULT_VLM  # the VLM Grad-CAM reads: scene, a saved VLM folder, open_clip:MODEL[:TAG]
     target: Literal["contrast", "score"] = "contrast"  # Grad-CAM target: a phrase's score minus the other colours' mean, or the score
-    locate: Literal["argmax", "peak_centroid"] = "peak_centroid"  # object position: the heat map's argmax cell, or the centroid of its peak
+    locate: Literal["argmax", "peak_centroid", "fine"] = "fine"  # object position: the heat map's argmax cell, the centroid of its peak, or the peak centroid of LayerCAM at the VLM's finer layer (mirrored and shifted views averaged)
     cell_centres: Literal["grid", "receptive_field"] = "receptive_field"  # pixel position of each Grad-CAM cell: its geometric centre, or the peak of its measured input gradient
     template: str = "{}"  # how a phrase is written to the text tower, e.g. "a {}"
     batch_size: int = 64  # images per Grad-CAM batch
@@ -61,7 +61,8 @@ def phrases_for(scene: str, colours) -> list[str]:
 class Grounder:
     """Grad-CAM coordinates of every colour's phrase on every camera of a dataset's images."""
 
-    def __init__(self, vlm, cfg: LabelConfig, data: ExplorationData, centres: list | None = None):
+    def __init__(self, vlm, cfg: LabelConfig, data: ExplorationData, centres: list | None = None,
+                 fine_centres: list | None = None):
         self.cfg, self.data = cfg, data
         # Colours the data can hold: the contrast of each phrase is against the other ones.
         self.allowed = [c for c in COLOURS if c not in data.config["exclude"]]
@@ -72,14 +73,19 @@ class Grounder:
             for scene in data.scenes
         }
         size = data.config["image_size"]
-        if centres is None:
-            # Measured once, on the first shard's front images, so that a resumed run uses the
-            # same centres as an uninterrupted one.
-            first = data.shard(data.shards[0], [f"images_{data.cameras[0]}"])[f"images_{data.cameras[0]}"]
-            centres = next(iter(self.gradcam.values())).calibrate(first[:8])
-        self.centres = np.asarray(centres, dtype=np.float64)
+        # Measured once, on the first shard's front images, so that a resumed run uses the
+        # same centres as an uninterrupted one.
+        first = data.shard(data.shards[0], [f"images_{data.cameras[0]}"])[f"images_{data.cameras[0]}"][:8]
+        cam = next(iter(self.gradcam.values()))
+        self.centres = np.asarray(cam.calibrate(first) if centres is None else centres, dtype=np.float64)
+        self.fine_centres = None
+        if cfg.locate == "fine":
+            self.fine_centres = np.asarray(cam.calibrate(first, fine=True) if fine_centres is None else fine_centres,
+                                           dtype=np.float64)
         for g in self.gradcam.values():
             g.set_centres(self.centres, (size, size))
+            if self.fine_centres is not None:
+                g.set_centres(self.fine_centres, (size, size), fine=True)
 
     def shard(self, arrays: dict) -> dict[str, np.ndarray]:
         """Per camera: ``gradcam_xy_<cam>`` (n, 4, 2), ``gradcam_score_<cam>``,
@@ -160,9 +166,10 @@ def label_dataset(data_folder, cfg: LabelConfig, out: str | Path = LABELS, vlm=N
         vlm = load_vlm(cfg.vlm)
     shards = ShardFolder(folder, kind="labels", config=asdict(cfg), n_shards=data.manifest["n_shards"],
                          extra={"data": str(Path(data_folder).resolve())})
-    grounder = Grounder(vlm, cfg, data, shards.manifest.get("centres"))
-    if "centres" not in shards.manifest:
-        shards.manifest["centres"] = grounder.centres.tolist()
+    grounder = Grounder(vlm, cfg, data, shards.manifest.get("centres"), shards.manifest.get("fine_centres"))
+    shards.manifest.setdefault("centres", grounder.centres.tolist())
+    if grounder.fine_centres is not None:
+        shards.manifest.setdefault("fine_centres", grounder.fine_centres.tolist())
     todo = [i for i in shards.pending() if shard_done(data, i)]
     bar = tqdm(total=sum(data.manifest["shards"][f"shard_{i:05d}"]["images"] for i in todo), unit="img",
                desc="label", disable=not progress)

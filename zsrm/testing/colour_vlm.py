@@ -33,6 +33,7 @@ _BACKGROUND = 0.1  # a constant channel, so that an image without any colour sti
 class ColourVLM(VisionLanguageModel):
     backend = "testing"
     gradcam_layer = "detect"
+    fine_layer = "detect.1"  # the detectors' ReLU at full resolution, before the pooling
 
     def __init__(self, image_size: int = 32, stride: int = 4):
         super().__init__()

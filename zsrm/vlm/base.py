@@ -27,6 +27,9 @@ class VisionLanguageModel(nn.Module, ABC):
 
     backend: str  # "open_clip" or "scene"
     gradcam_layer: str  # name of the module whose output Grad-CAM reads
+    # An earlier module on a finer grid whose LayerCAM refines where Grad-CAM's coarse map
+    # points (zsrm.grounding's locate="fine"); None: the Grad-CAM layer itself.
+    fine_layer: str | None = None
     image_size: int  # side of the square input that preprocess produces
     logit_scale: nn.Parameter
 
