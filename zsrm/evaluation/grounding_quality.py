@@ -359,7 +359,7 @@ def figure3(data_folder, vlm, out: str | Path, labels: str | Path = LABELS, inde
         for ax in axes[r]:
             ax.set_xticks([])
             ax.set_yticks([])
-    fig.suptitle(f"Grad-CAM grounding ({cfg.vlm}), image {index}: + located, o true centre", fontsize=9)
+    fig.suptitle(f"Grad-CAM grounding ({cfg.vlm}), image {index}: + located ({cfg.locate}), o true centre", fontsize=9)
     return save_figure(fig, out)
 
 
