@@ -140,3 +140,15 @@ def test_older_folders_gain_the_calibration_on_resume(whole, tmp_path):
     assert ExplorationData(tmp_path).table_homography == {}
     collect(CollectConfig(**CFG), tmp_path, progress=False)
     assert ExplorationData(tmp_path).table_homography == ExplorationData(whole).table_homography
+
+
+def test_reward_data_labels_with_the_fine_locator_and_table_1():
+    from dataclasses import asdict
+
+    from zsrm.pipeline.build import RewardData
+    from zsrm.tasks.relations import WORLD_THRESHOLDS
+
+    cfg = RewardData().label_config()
+    assert cfg.locate == "fine" and cfg.world_thresholds() == WORLD_THRESHOLDS
+    before = RewardData(locate="peak_centroid", eps_y=0.12, close=0.12).label_config()  # the shipped student's data
+    assert before.locate == "peak_centroid" and before.thresholds == {**asdict(WORLD_THRESHOLDS), "eps_y": 0.12, "close": 0.12}

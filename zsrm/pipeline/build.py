@@ -11,12 +11,14 @@ from __future__ import annotations
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 from zsrm.data.collect import CollectConfig
 from zsrm.data.dataset import LABELS
 from zsrm.fullmodel.training import FinetuneConfig
 from zsrm.grounding.annotate import LabelConfig
 from zsrm.pipeline import narrow
+from zsrm.tasks.relations import WORLD_THRESHOLDS
 from zsrm.vlm.factory import DEFAULT_VLM
 from zsrm.vlm.files import check_writable
 from zsrm.vlm.pretrain import PretrainConfig
@@ -100,15 +102,16 @@ class Label(LabelConfig):
 class RewardData:
     """The labelled exploration data the full reward model trains on (collect + label).
 
-    Same as ``zsrm collect`` + ``zsrm label`` with the settings of results/reward_eval.json:
-    both scenes (push_close is a puck task), 16,000 images, a quarter of the episodes starting
-    with two objects side by side and some stacked (random actions alone rarely bring two pucks
-    together); Grad-CAM cell centres on the grid; the tilted camera read on the table in metres
-    through its calibration; and two labeler calibrations against Grad-CAM's localisation error
-    (the oracle keeps Table 1's thresholds): "on top of"/"below" height offset eps_y 12 cm (9 cm
-    in Table 1: two stacked blocks read 1.7 block widths apart vertically) and "close to" 12 cm
-    (10 cm in Table 1: Grad-CAM pushes two touching objects apart, so at 10 cm only 45% of
-    touching puck pairs were labelled close, at 12 cm 89%). Both stages resume after a kill.
+    Same as ``zsrm collect`` + ``zsrm label``: both scenes (push_close is a puck task), 16,000
+    images, a quarter of the episodes starting with two objects side by side and some stacked
+    (random actions alone rarely bring two pucks together); Grad-CAM cell centres on the grid;
+    the tilted camera read on the table in metres through its calibration; object positions
+    from ``--locate fine`` and Table 1's thresholds. results/reward_eval.json was made before
+    with ``--locate peak_centroid --eps-y 0.12 --close 0.12``: that labeler pushed touching
+    objects apart, and 12 cm made up for it (at 10 cm 45% of touching puck pairs read close).
+    The fine locator does not (development split, F1 against the oracle, pucks' close to:
+    0.90 at 10 cm, 0.82 at 12 cm; blocks' on top of: 0.62 at 9 cm, 0.61 at 12 cm). Both
+    stages resume after a kill.
     """
 
     out: str = "data/zsrm/explore"  # dataset folder (zsrm finetune reads it by default)
@@ -116,8 +119,9 @@ class RewardData:
     shard_size: int = 250  # images per shard
     seed: int = 0  # seed of the whole dataset
     labels: str = LABELS  # labels folder inside OUT
-    eps_y: float = 0.12  # on top of / below: largest height offset (m)
-    close: float = 0.12  # close to: largest centre distance (m)
+    eps_y: float = WORLD_THRESHOLDS.eps_y  # on top of / below: largest height offset (m), Table 1's
+    close: float = WORLD_THRESHOLDS.close  # close to: largest centre distance (m), Table 1's
+    locate: Literal["argmax", "peak_centroid", "fine"] = "fine"  # object positions: see zsrm label --locate
     vlm: str = DEFAULT_VLM  # the VLM whose Grad-CAM labels the frames: scene, a saved folder, open_clip:MODEL[:TAG]
     quiet: bool = False  # no progress bars
 
@@ -128,9 +132,7 @@ class RewardData:
     def label_config(self) -> LabelConfig:
         from dataclasses import asdict
 
-        from zsrm.tasks.relations import WORLD_THRESHOLDS
-
-        return LabelConfig(cell_centres="grid", vlm=self.vlm,
+        return LabelConfig(cell_centres="grid", vlm=self.vlm, locate=self.locate,
                            thresholds={**asdict(WORLD_THRESHOLDS), "eps_y": self.eps_y, "close": self.close})
 
     def run(self) -> int:
