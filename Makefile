@@ -42,6 +42,9 @@ results: setup
 	# Learning from pixels (Figure 6 rewards oracle/zsrm/random; hours on 2 cores: 18 PPO runs of 300k steps)
 	$(VENV)/bin/zsrm sweep --tasks push_close place_right stack --rewards oracle zsrm random --seeds 0 1 2 \
 		--out results/rl/learning.json
+	$(PY) benchmarks/reward_hacking.py runs/rl/stack-zsrm-0/policy --episodes 20 --out results/rl/reward_hacking_stack.json
+	$(PY) benchmarks/reward_hacking.py runs/rl/stack-zsrm-1/policy --episodes 20 \
+		--out results/rl/reward_hacking_stack_seed1.json
 	# Table 2 (hours on 2 cores: 18 PPO runs of 200k steps, then rollouts, distillation, 36 x 50 x 2 episodes)
 	$(VENV)/bin/zsrm multitask-policies --steps 200000 --out results/multitask/policies.json
 	$(VENV)/bin/zsrm multitask-rollouts --episodes 50 --out data/multitask/rollouts
