@@ -27,12 +27,14 @@ from zsrm.vlm import load_vlm
 from zsrm.vlm.files import write_json
 
 
-def score_rollouts(policy: str, episodes: int) -> dict[str, np.ndarray]:
-    """Per decision: the zsrm reward, the oracle's verdict and the goal objects' plane offset."""
+def score_rollouts(policy: str, episodes: int, reward_model: str | None = None) -> dict[str, np.ndarray]:
+    """Per decision: the zsrm reward (of ``reward_model``, default the one the policy trained
+    with), the oracle's verdict and the goal objects' plane offset."""
     bundle = PolicyBundle.load(policy)
     cfg = bundle.cfg
     task = task_entry(cfg.goal).task
-    venv = VecZeroShotReward(make_vec(cfg, episodes, eval_seed(cfg.seed)), make_reward(replace(cfg, reward="zsrm")),
+    scorer = replace(cfg, reward="zsrm", reward_model=reward_model or cfg.reward_model)
+    venv = VecZeroShotReward(make_vec(cfg, episodes, eval_seed(cfg.seed)), make_reward(scorer),
                              task_entry(cfg.goal).goal)
     venv = VecImageFeatures(venv, load_vlm(cfg.vlm), goal_camera(cfg.goal))
     camera = RELATIONS[task.relation].camera
@@ -67,14 +69,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("policy", help="a policy folder written by zsrm train")
     parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--reward-model", help="score with this zsrm model folder instead of the policy's own")
     parser.add_argument("--out", default="results/rl/reward_hacking.json")
     args = parser.parse_args()
-    summary = summarise(score_rollouts(args.policy, args.episodes))
+    summary = summarise(score_rollouts(args.policy, args.episodes, args.reward_model))
     summary["meta"] = {"policy": args.policy, "episodes": args.episodes, "thresholds": asdict(WORLD_THRESHOLDS),
+                       "reward_model": args.reward_model or "the policy's own",
                        "offset": "first goal object minus second, in the plane of the camera the relation is "
                                  "read on (metres)",
                        "command": f"python benchmarks/reward_hacking.py {args.policy} --episodes {args.episodes} "
-                                  f"--out {args.out}"}
+                                  + (f"--reward-model {args.reward_model} " if args.reward_model else "")
+                                  + f"--out {args.out}"}
     write_json(args.out, summary)
     for key in ("both", "zsrm_only", "oracle_only"):
         print(key, summary[key])
