@@ -32,10 +32,10 @@ def score_rollouts(policy: str, episodes: int, reward_model: str | None = None) 
     with), the oracle's verdict and the goal objects' plane offset."""
     bundle = PolicyBundle.load(policy)
     cfg = bundle.cfg
-    task = task_entry(cfg.goal).task
+    entry = task_entry(cfg.goal)
+    task = entry.task
     scorer = replace(cfg, reward="zsrm", reward_model=reward_model or cfg.reward_model)
-    venv = VecZeroShotReward(make_vec(cfg, episodes, eval_seed(cfg.seed)), make_reward(scorer),
-                             task_entry(cfg.goal).goal)
+    venv = VecZeroShotReward(make_vec(cfg, episodes, eval_seed(cfg.seed)), make_reward(scorer), entry.goal)
     venv = VecImageFeatures(venv, load_vlm(cfg.vlm), goal_camera(cfg.goal))
     camera = RELATIONS[task.relation].camera
     obs, rows, running = venv.reset(), [], np.ones(episodes, dtype=bool)

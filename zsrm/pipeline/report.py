@@ -93,7 +93,7 @@ window.addEventListener("load", function () {
 
 def write_report(folder: Path, scale: str, vlm: str, log: list[dict], workdir: Path, wall_s: float) -> Path:
     """Write the report of a ``zsrm reproduce`` run; at the demo scale also ``results/demo.json``."""
-    from zsrm.pipeline.reproduce import demo_result
+    from zsrm.pipeline.reproduce import SCALES, demo_result, is_demo
 
     folder.mkdir(parents=True, exist_ok=True)
     report = Report(folder)
@@ -104,9 +104,7 @@ def write_report(folder: Path, scale: str, vlm: str, log: list[dict], workdir: P
     report.table(["stage", "what", "seconds", "cached", "command"],
                  [[e["stage"], e["what"], f"{e['seconds']:.0f}", "yes" if e.get("cached") else "no", e["command"]]
                   for e in log])
-    if scale in ("demo", "tiny"):
-        from zsrm.pipeline.reproduce import SCALES
-
+    if is_demo(scale):
         result = demo_result(log, wall_s, SCALES[scale]["task"])
         write_json(RESULTS / "demo.json" if scale == "demo" else folder / "demo.json", result)
         demo_section(report, result, workdir)

@@ -48,6 +48,11 @@ SCALES: dict[str, dict] = {
 }
 
 
+def is_demo(scale: str) -> bool:
+    """Demo-kind scales (demo, tiny) train one task with the shipped models; the others build everything."""
+    return "task" in SCALES[scale]
+
+
 @dataclass
 class Stage:
     name: str
@@ -154,15 +159,17 @@ def model_stages(scale: dict, vlm: str) -> list[Stage]:
         RewardData(out=str(folder), vlm=run_vlm(folder, vlm), **sizes["data"]).run()  # this run's Grad-CAM
         return {"data": str(folder)}
 
+    student_size = {"steps": 4000, **sizes["student"]}
+
     def student(folder: Path) -> dict:
         Finetune(data=str(folder.parent / "data"), out=str(folder / "model"), student=True,
-                 vlm=run_vlm(folder, vlm), **{"steps": 4000, **sizes["student"]}).run()
+                 vlm=run_vlm(folder, vlm), **student_size).run()
         return {"model": str(folder / "model")}
 
     stages = [
         Stage("data", "random exploration frames, Grad-CAM captions", {"vlm": vlm, **sizes["data"]}, data,
               "zsrm reward-data"),
-        Stage("student", "the student reward model on the captions", {"vlm": vlm, "steps": 4000, **sizes["student"]},
+        Stage("student", "the student reward model on the captions", {"vlm": vlm, **student_size},
               student, "zsrm finetune --student --steps 4000"),
     ]
     if vlm == "scene":
@@ -248,8 +255,7 @@ class Reproduce:
         check_writable(Path(self.report), folder=True)
         scale = SCALES[self.scale]
         start = time.time()
-        demo = self.scale in ("demo", "tiny")  # tiny and tiny-cpu: test scales
-        stages = demo_stages(scale, self.vlm) if demo else cpu_stages(scale, self.vlm, self.address)
+        stages = demo_stages(scale, self.vlm) if is_demo(self.scale) else cpu_stages(scale, self.vlm, self.address)
         log = run_stages(stages, workdir)
         wall = time.time() - start
         index = write_report(Path(self.report), self.scale, self.vlm, log, workdir, wall)
