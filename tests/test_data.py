@@ -94,6 +94,22 @@ def test_other_options_cannot_mix(whole):
         CollectConfig(images=0)
     with pytest.raises(ValueError, match="unknown camera"):
         CollectConfig(cameras=("top",))
+    with pytest.raises(ValueError, match="p_hold must be a probability"):
+        CollectConfig(p_hold=1.5)
+
+
+def test_held_blocks_are_an_option_older_datasets_never_had(whole, tmp_path):
+    """p_hold is written to the manifest only when set, so folders collected before it existed
+    still resume; with it, some tabletop frames show a block in the air."""
+    assert "p_hold" not in CollectConfig(**CFG).to_json()
+    collect(CollectConfig(**CFG), whole, progress=False)  # the existing folder still matches
+    cfg = CollectConfig(**{**CFG, "images": 8, "p_hold": 1.0, "min_objects": 3})
+    arrays = collect(cfg, tmp_path / "held", progress=False).load(["positions", "step"])
+    first = arrays["step"] == 0  # frames at reset
+    heights = np.nanmax(arrays["positions"][first][..., 2], axis=1) - np.nanmin(arrays["positions"][first][..., 2], axis=1)
+    assert first.any() and (heights > 0.06).any()
+    pucks = CollectConfig(**{**CFG, "images": 2, "p_hold": 1.0, "scenes": ("pushing",)})
+    assert len(collect(pucks, tmp_path / "pucks", progress=False)) == 2  # no gripper: the option is not passed
 
 
 def test_cli_end_to_end_and_errors(tmp_path, capsys, monkeypatch):

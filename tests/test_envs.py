@@ -159,6 +159,31 @@ def test_exploration_objects_start_side_by_side_when_asked():
     env.close()
 
 
+def test_exploration_can_start_with_a_block_held_above_another():
+    """p_hold=1: the gripper holds a block in the air over another, a hover that is sometimes
+    "on top of" and mostly too high; the block stays held while the grip stays closed."""
+    env = TabletopEnv(task=None, objects=("red", "green", "yellow"), image_size=16)
+    rises, on_top = [], []
+    for seed in range(12):
+        _, info = env.reset(seed=seed, options={"p_hold": 1.0})
+        if env.held is None:  # needs two blocks on the table with nothing stacked on them
+            continue
+        pos = info["object_positions"]
+        held = pos[env.held]
+        base = min((p for c, p in pos.items() if c != env.held), key=lambda p: np.linalg.norm(p[:2] - held[:2]))
+        rises.append(held[2] - base[2])
+        on_top.append(bool(holds_in_world("on_top_of", [held, base])))
+        offset = held - env.gripper_position
+        for _ in range(5):
+            _, _, _, _, info = env.step(np.array([0.3, 0.0, 0.3, 1.0]))  # move with the grip closed
+        assert np.allclose(info["object_positions"][env.held] - env.gripper_position, offset, atol=0.01)
+    assert len(rises) >= 6 and min(rises) > 2 * 0.03 - 0.005 and max(rises) < 0.22
+    assert not all(on_top)  # most hover too high to count
+    _, _ = env.reset(seed=0)  # the default never holds
+    assert env.held is None
+    env.close()
+
+
 def test_bad_input_gets_clear_errors():
     with pytest.raises(ValueError, match="known cameras: front, left, tilted"):
         TabletopEnv("stack", cameras=("top",))

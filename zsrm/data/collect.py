@@ -41,6 +41,7 @@ class CollectConfig:
     record_every: int = 5  # keep the images of every this many steps, from the reset on
     p_stack: float = 0.25  # chance that a block starts stacked on another
     p_side: float = 0.25  # chance that an object starts beside another (near or touching)
+    p_hold: float = 0.0  # tabletop: chance that the gripper starts holding a block above another
     colours: tuple[str, ...] = field(init=False)
 
     def __post_init__(self):
@@ -48,7 +49,7 @@ class CollectConfig:
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        for name in ("p_stack", "p_side"):
+        for name in ("p_stack", "p_side", "p_hold"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {getattr(self, name)!r}")
         self.scenes, self.cameras, self.exclude = tuple(self.scenes), tuple(self.cameras), tuple(self.exclude)
@@ -75,6 +76,8 @@ class CollectConfig:
     def to_json(self) -> dict:
         d = asdict(self)
         d.pop("colours")
+        if not d["p_hold"]:  # added later: datasets collected before it keep matching their manifest
+            d.pop("p_hold")
         return d
 
 
@@ -145,8 +148,10 @@ def collect_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> 
             chosen = set(rng.choice(cfg.colours, n_obj, replace=False).tolist())
             colours = tuple(c for c in COLOURS if c in chosen)
             env = envs.get(scene, colours)
-            obs, info = env.reset(seed=int(rng.integers(2**31 - 1)),
-                                  options={"p_stack": cfg.p_stack, "p_side": cfg.p_side})
+            options = {"p_stack": cfg.p_stack, "p_side": cfg.p_side}
+            if scene == "tabletop" and cfg.p_hold:  # the only scene with a gripper that holds
+                options["p_hold"] = cfg.p_hold
+            obs, info = env.reset(seed=int(rng.integers(2**31 - 1)), options=options)
             for step in range(cfg.episode_steps):
                 if step % cfg.record_every == 0 and row < n:
                     for cam in cfg.cameras:

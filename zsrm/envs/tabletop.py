@@ -20,6 +20,7 @@ X_RANGE = (-0.2, 0.2)  # fingers (6.1 cm out) cannot push a block past the edge 
 Y_RANGE = (-0.16, 0.16)
 Z_RANGE = (TABLE_TOP + 0.084, TABLE_TOP + 0.33)
 FINGER_OPEN, FINGER_CLOSED = 0.0, 0.045
+FINGER_HOLD = 0.053 - 0.008 - BLOCK_HALF  # finger command that rests on a held block's faces
 GRASP_HEIGHT = 0.056  # gripper origin above a block's centre when the fingers hold it
 FINGERTIP_DROP = 0.08  # fingertips below the gripper origin
 # The grip command has hysteresis: the fingers close when it rises above GRIP_CLOSE and open
@@ -74,6 +75,7 @@ class TabletopEnv(MujocoPixelEnv):
                           for c in self.objects if c not in CONTAINERS}  # the box is not grasped
         self.held: str | None = None
         self.closed = False  # the grip state the hysteresis keeps
+        self._hold_at_reset: str | None = None  # exploration: the block the gripper starts holding
 
     # --- layout ------------------------------------------------------------------------
     def _initial_layout(self):
@@ -116,6 +118,34 @@ class TabletopEnv(MujocoPixelEnv):
             return d > BOX_HALF + BLOCK_HALF + 0.01 or above
         return all(ok(p) for c, p in layout.items() if c != "box")
 
+    def _random_layout(self, p_stack: float = 0.25, p_side: float = 0.0, p_hold: float = 0.0):
+        """Exploration: :meth:`MujocoPixelEnv._random_layout`, and with probability ``p_hold`` the
+        gripper starts holding a block in the air above another (up to 15 cm above stacked
+        height, mostly in line with it). Random actions almost never lift a block over another,
+        so without these frames a reward model never sees a block that hovers just too high to
+        be "on top of" one, and a policy learns to hover instead of stacking."""
+        layout = super()._random_layout(p_stack, p_side)
+        self._hold_at_reset = None
+        rng = self.np_random
+        if not rng.random() < p_hold:
+            return layout
+        # Blocks on the table with nothing stacked on them (a hovering block must not hit one).
+        free = [c for c, p in layout.items() if c not in self.containers and p[2] < TABLE_TOP + 1.5 * BLOCK_HALF
+                and not any(np.allclose(q[:2], p[:2], atol=BLOCK_HALF) and q[2] > p[2] for q in layout.values())]
+        if len(free) < 2:
+            return layout
+        mover, base = rng.choice(free, 2, replace=False).tolist()
+        b = layout[base]
+        spread = 0.3 * BLOCK_HALF if rng.random() < 0.7 else 2.5 * BLOCK_HALF
+        gap = rng.uniform(0.005, 0.15)  # above stacked height: "on top of" holds below 3 cm
+        p = np.array([b[0] + rng.uniform(-spread, spread), b[1] + rng.uniform(-0.3, 0.3) * BLOCK_HALF,
+                      b[2] + 2 * BLOCK_HALF + gap])
+        p[:2] = np.clip(p[:2], [X_RANGE[0], Y_RANGE[0]], [X_RANGE[1], Y_RANGE[1]])
+        p[2] = min(p[2], Z_RANGE[1] - GRASP_HEIGHT)
+        layout[mover] = p
+        self._hold_at_reset = mover
+        return layout
+
     def _set_object(self, colour: str, xyz):
         if colour in CONTAINERS:  # fixed to the world: move the body, standing on the table
             self.model.body_pos[self._body(colour)] = (xyz[0], xyz[1], TABLE_TOP + BOX_HALF_HEIGHT)
@@ -149,6 +179,15 @@ class TabletopEnv(MujocoPixelEnv):
         self.data.eq_active[list(self._grasp_eq.values())] = 0
         self.held = None
         self.closed = False
+        if self.task is None and self._hold_at_reset is not None:  # exploration: start holding it
+            block = self.data.qpos[self._qpos_adr(self._hold_at_reset):self._qpos_adr(self._hold_at_reset) + 3]
+            self.data.mocap_pos[self._mocap] = block + (0.0, 0.0, GRASP_HEIGHT)
+            self.data.qpos[self._gripper_qadr:self._gripper_qadr + 3] = block + (0.0, 0.0, GRASP_HEIGHT)
+            mujoco.mj_forward(self.model, self.data)
+            self.held, self.closed = self._hold_at_reset, True
+            self._weld(self.held)
+            self.data.ctrl[:] = FINGER_HOLD
+            self._hold_at_reset = None
 
     @staticmethod
     def task_mover(task) -> str:
@@ -185,7 +224,7 @@ class TabletopEnv(MujocoPixelEnv):
             self.data.eq_active[self._grasp_eq[self.held]] = 0
             self.held = None
         # Fingers close onto a held block's faces, or fully when empty.
-        self.data.ctrl[:] = (0.053 - 0.008 - BLOCK_HALF) if self.held else (FINGER_CLOSED if closing else FINGER_OPEN)
+        self.data.ctrl[:] = FINGER_HOLD if self.held else (FINGER_CLOSED if closing else FINGER_OPEN)
         self._simulate()
 
     def _block_between_fingers(self) -> str | None:

@@ -110,7 +110,10 @@ class RewardData:
     with ``--locate peak_centroid --eps-y 0.12 --close 0.12``: that labeler pushed touching
     objects apart, and 12 cm made up for it (at 10 cm 45% of touching puck pairs read close).
     The fine locator does not (development split, F1 against the oracle, pucks' close to:
-    0.90 at 10 cm, 0.82 at 12 cm; blocks' on top of: 0.62 at 9 cm, 0.61 at 12 cm). Both
+    0.90 at 10 cm, 0.82 at 12 cm; blocks' on top of: 0.62 at 9 cm, 0.61 at 12 cm). A quarter
+    of the tabletop episodes start with a block held in the air above another (``--p-hold``):
+    without them a stack policy trained on the student learned to hover a block 11 cm above
+    the other, which the student called "on top of" (benchmarks/reward_hacking.py). Both
     stages resume after a kill.
     """
 
@@ -119,6 +122,7 @@ class RewardData:
     shard_size: int = 250  # images per shard
     seed: int = 0  # seed of the whole dataset
     labels: str = LABELS  # labels folder inside OUT
+    p_hold: float = 0.25  # tabletop episodes that start with a block held above another (0: as before)
     eps_y: float = WORLD_THRESHOLDS.eps_y  # on top of / below: largest height offset (m), Table 1's
     close: float = WORLD_THRESHOLDS.close  # close to: largest centre distance (m), Table 1's
     locate: Literal["argmax", "peak_centroid", "fine"] = "fine"  # object positions: see zsrm label --locate
@@ -127,7 +131,7 @@ class RewardData:
 
     def collect_config(self) -> CollectConfig:
         return CollectConfig(images=self.images, shard_size=self.shard_size, seed=self.seed,
-                             scenes=("tabletop", "pushing"))
+                             scenes=("tabletop", "pushing"), p_hold=self.p_hold)
 
     def label_config(self) -> LabelConfig:
         from dataclasses import asdict
