@@ -28,11 +28,11 @@ results: setup
 	$(VENV)/bin/zsrm label data/grounding --vlm scene
 	$(VENV)/bin/zsrm eval-grounding data/grounding --out results/grounding.json --figure results/figure3.png
 	$(PY) benchmarks/gradcam_speed.py --out results/gradcam_speed.json
-	$(VENV)/bin/zsrm reward-data --out data/zsrm/explore
-	$(VENV)/bin/zsrm finetune --student --data data/zsrm/explore --steps 4000 --out runs/zsrm/student
+	$(VENV)/bin/zsrm reward-data --out data/zsrm/hold-8k --images 8000 --p-hold 0.25
+	$(VENV)/bin/zsrm finetune --student --data data/zsrm/hold-8k --steps 4000 --threads 1 --out runs/zsrm/student
 	cp runs/zsrm/student/config.json runs/zsrm/student/model.safetensors runs/zsrm/student/training.json \
 		zsrm/fullmodel/weights/student/
-	$(VENV)/bin/zsrm finetune --data data/zsrm/explore --out runs/zsrm/vlm
+	$(VENV)/bin/zsrm finetune --data data/zsrm/hold-8k --out runs/zsrm/vlm
 	$(VENV)/bin/zsrm eval-reward --zsrm student --compare finetuned_vlm=runs/zsrm/vlm \
 		--tasks stack place_left place_right push_close place_below place_between place_front place_behind place_inside \
 		--out results/reward_eval.json
@@ -42,9 +42,9 @@ results: setup
 	# Learning from pixels (Figure 6 rewards oracle/zsrm/random; hours on 2 cores: 18 PPO runs of 300k steps)
 	$(VENV)/bin/zsrm sweep --tasks push_close place_right stack --rewards oracle zsrm random --seeds 0 1 2 \
 		--out results/rl/learning.json
+	# Does the stack policy trained on the student hover instead of stacking? (results/rl/student_v1/
+	# holds the same diagnostics of the earlier student, which did, and is kept for the record)
 	$(PY) benchmarks/reward_hacking.py runs/rl/stack-zsrm-0/policy --episodes 20 --out results/rl/reward_hacking_stack.json
-	$(PY) benchmarks/reward_hacking.py runs/rl/stack-zsrm-1/policy --episodes 20 \
-		--out results/rl/reward_hacking_stack_seed1.json
 	# Table 2 (hours on 2 cores: 18 PPO runs of 200k steps, then rollouts, distillation, 36 x 50 x 2 episodes)
 	$(VENV)/bin/zsrm multitask-policies --steps 200000 --out results/multitask/policies.json
 	$(VENV)/bin/zsrm multitask-rollouts --episodes 50 --out data/multitask/rollouts

@@ -95,6 +95,9 @@ def test_config_is_checked():
     with pytest.raises(ValueError, match="action_repeat"):
         TrainConfig(action_repeat=3)
     assert TrainConfig(action_repeat=4).episode_decisions == 25
+    # A zsrm run records which shipped student it used; other rewards keep the name as given.
+    assert TrainConfig(reward="zsrm").reward_model.startswith("student@")
+    assert TrainConfig(reward="oracle").reward_model == "student"
 
 
 def test_mean_se():

@@ -17,6 +17,27 @@ def test_shipped_scene_model_missing_says_how_to_build_it(tmp_path, monkeypatch,
     assert len(err) == 1 and "zsrm pretrain-vlm" in err[0]
 
 
+def test_a_pinned_shipped_model_loads_only_as_that_version(tmp_path, monkeypatch):
+    """student@DIGEST (what a training run records) loads while the shipped weights are that
+    version; once they are retrained, it says so instead of scoring with other weights."""
+    import shutil
+
+    from zsrm.fullmodel import SHIPPED_STUDENT_DIR, load_reward_backbone
+    from zsrm.vlm.factory import pinned
+
+    spec = pinned("student")
+    assert spec.startswith("student@") and len(spec) == len("student@") + 12
+    assert pinned(spec) == spec and pinned("scene").startswith("scene@") and pinned("/some/folder") == "/some/folder"
+    load_reward_backbone(spec)
+    retrained = tmp_path / "student"
+    shutil.copytree(SHIPPED_STUDENT_DIR, retrained)
+    (retrained / "model.safetensors").write_bytes((retrained / "model.safetensors").read_bytes() + b" ")
+    monkeypatch.setitem(SHIPPED, "student", retrained)
+    with pytest.raises(ValueError, match="retrained since"):
+        load_reward_backbone(spec)
+    assert pinned("student") != spec
+
+
 def test_saved_folders_load_by_path(tmp_path):
     create_scene_vlm("tiny", seed=0).save(tmp_path / "m")
     assert isinstance(load_vlm(str(tmp_path / "m")), SceneVLM)

@@ -23,7 +23,8 @@ class TrainConfig:
     steps: int = 300_000
     """environment (control) steps to train for; an agent step covers `action_repeat` of them"""
     reward_model: str = "student"
-    """for --reward zsrm: the model folder (zsrm finetune) or 'student', the shipped student"""
+    """for --reward zsrm: the model folder (zsrm finetune) or 'student', the shipped student
+    (recorded as student@<version of its weights>)"""
     zsrm_output: Literal["binary", "margin"] = "binary"
     """for --reward zsrm: binary (the paper's), or margin (dense: goal score minus best negative)"""
     vlm: str = "scene"
@@ -89,6 +90,11 @@ class TrainConfig:
             raise ValueError(f"unknown start {self.start!r}; choose auto, above or around")
         if self.start == "auto":
             self.start = "around" if goal_relation(self.goal) in STACKING else "above"
+        if self.reward == "zsrm":  # record which shipped student: a retrained one is another run
+            import zsrm.fullmodel  # noqa: F401  (registers the shipped student)
+            from zsrm.vlm.factory import pinned
+
+            self.reward_model = pinned(self.reward_model)
         if 100 % self.action_repeat:
             raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
 

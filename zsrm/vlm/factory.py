@@ -4,7 +4,8 @@ Specs (open_clip style: factory functions, architectures as data):
 
 * ``"scene"``: the pretrained scene VLM shipped in ``zsrm/vlm/weights/scene/`` (built by
   ``zsrm pretrain-vlm``); likewise ``"student"``, the reward student shipped with
-  :mod:`zsrm.fullmodel` (see :mod:`zsrm.vlm.registry`);
+  :mod:`zsrm.fullmodel` (see :mod:`zsrm.vlm.registry`); ``"student@DIGEST"`` that model only
+  if its weights are that version (what training runs record, see :func:`pinned`);
 * a folder saved by ``vlm.save(folder)``: its ``config.json`` names the model's kind;
 * ``"open_clip:MODEL"``: open_clip's default weights for MODEL (``open_clip:RN50`` is OpenAI's
   RN50, the paper's model); ``"open_clip"`` alone means ``open_clip:RN50``;
@@ -32,6 +33,20 @@ HOW_TO_BUILD = {"scene": "build it with `zsrm pretrain-vlm` (about 15 minutes on
                 "student": "reinstall zsrm or train one with zsrm finetune --student"}
 
 
+def shipped_digest(name: str) -> str:
+    """The first 12 hex digits of the SHA-256 of a shipped model's weights (which version it is)."""
+    import hashlib
+
+    return hashlib.sha256((shipped_folder(name) / WEIGHTS_FILE).read_bytes()).hexdigest()[:12]
+
+
+def pinned(spec: str) -> str:
+    """``spec`` with a shipped model's name pinned to its version (``student@<digest>``), so that
+    a run records which weights it used and a later, retrained shipped model does not pass for
+    them; other specs unchanged."""
+    return f"{spec}@{shipped_digest(spec)}" if isinstance(spec, str) and spec in SHIPPED else spec
+
+
 def shipped_folder(name: str) -> Path:
     """The folder of a model shipped with zsrm; FileNotFoundError saying how to build it if missing."""
     folder = SHIPPED[name]
@@ -47,6 +62,13 @@ def load_vlm(spec: str | Path = DEFAULT_VLM, device: str | torch.device = "cpu")
     if not isinstance(spec, str) or not spec.strip():
         raise ValueError(f"give a VLM spec: {SPEC_HELP}")
     spec = spec.strip()
+    name, _, digest = spec.partition("@")
+    if digest and name in SHIPPED:  # a pinned version (see pinned): only those weights will do
+        if shipped_digest(name) != digest:
+            raise ValueError(f"{spec!r} is the shipped {name} model of version {digest}, but the installed one is "
+                             f"{shipped_digest(name)} (retrained since); install that zsrm version, or retrain "
+                             f"with the installed model")
+        spec = name
     if spec in SHIPPED:
         return load_folder(shipped_folder(spec), device)
     if spec == "open_clip" or spec.startswith("open_clip:"):
