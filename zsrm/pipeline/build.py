@@ -21,19 +21,27 @@ from zsrm.pipeline import narrow
 from zsrm.tasks.relations import WORLD_THRESHOLDS
 from zsrm.vlm.factory import DEFAULT_VLM
 from zsrm.vlm.files import check_writable
-from zsrm.vlm.pretrain import PretrainConfig
+from zsrm.vlm.pretrain import PretrainConfig, check_config
 
 
 def pretrain_scene_vlm(cfg: PretrainConfig, fresh: bool = False, progress: bool = True):
-    """The renders (a data stage, cached in WORKDIR/renders), then the scene VLM trained on them."""
+    """The renders (a data stage, cached in WORKDIR/renders; the pendulum's in
+    WORKDIR/pendulum-renders when ``cfg.pendulum_scenes``), then the scene VLM trained on them."""
     from zsrm.data.renders import load_renders
-    from zsrm.vlm.pretrain import pretrain
+    from zsrm.vlm.pretrain import check_config, pretrain
 
+    check_config(cfg)
     if fresh:
         shutil.rmtree(cfg.workdir, ignore_errors=True)
     renders = load_renders(Path(cfg.workdir) / "renders", cfg.scenes, cfg.shard_size, cfg.seed, cfg.image_size,
                            progress)
-    return pretrain(cfg, renders, progress)
+    pendulum = None
+    if cfg.pendulum_scenes:
+        from zsrm.data.pendulum_renders import load_pendulum_renders
+
+        pendulum = load_pendulum_renders(Path(cfg.workdir) / "pendulum-renders", cfg.pendulum_scenes,
+                                         cfg.shard_size, cfg.seed, cfg.image_size, progress)
+    return pretrain(cfg, renders, progress, pendulum=pendulum)
 
 
 @dataclass(kw_only=True)
@@ -53,6 +61,7 @@ class PretrainVlm(PretrainConfig):
         for name in ("scenes", "steps", "batch_size", "shard_size", "checkpoint_every"):
             if getattr(cfg, name) < 1:
                 raise ValueError(f"--{name.replace('_', '-')} must be at least 1")
+        check_config(cfg)
         check_writable(cfg.out, folder=True)
         check_writable(cfg.workdir, folder=True)
         pretrain_scene_vlm(cfg, fresh=self.fresh, progress=not self.quiet)

@@ -7,6 +7,14 @@ contrastive loss (identical captions in a batch are positives, not negatives).
 The renders are data, made by a data stage (:mod:`zsrm.data.renders`, cached in
 ``WORKDIR/renders``) and handed to :func:`pretrain`: the VLM knows no simulator.
 
+With ``pendulum_scenes`` N > 0, N renders of the double pendulum at random poses
+(:mod:`zsrm.data.pendulum_renders`, cached in ``WORKDIR/pendulum-renders``) join the batches,
+captioned with the pole's pose in words ("an inverted pendulum standing upright", "a pendulum
+tilting to the left", "a fallen pendulum", :mod:`zsrm.tasks.pendulum`): what CLIP learned from
+web captions and the pendulum's base reward (Figure 4) needs. Such a VLM is another model: it
+goes to a folder named with ``out``, never over the shipped one. With N = 0 nothing changes
+(the same batches, the same identity as the shipped VLM's).
+
 Resumable: the model, optimizer and step are checkpointed in ``WORKDIR/checkpoint/``;
 running the same command again continues where a killed run stopped. Every step's batch, captions and flips come from
 ``np.random.default_rng([seed, step])``, so a resumed run matches an uninterrupted one.
@@ -25,6 +33,7 @@ from torch import nn
 
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.catalogue import SCENE_SHAPES
+from zsrm.tasks.pendulum import POSES, all_pendulum_captions, mirrored, pendulum_caption
 from zsrm.vlm.files import atomic_path
 from zsrm.vlm.losses import multi_positive_contrastive_loss
 from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
@@ -57,13 +66,28 @@ class PretrainConfig:
     seed: int = 0  # seed of the renders, the initial weights and every batch
     checkpoint_every: int = 250  # steps between checkpoints
     threads: int = 0  # torch threads (0: torch's default)
+    pendulum_scenes: int = 0  # pendulum renders with pose captions (upright, leaning, fallen) to mix in; needs --out
 
     # Settings that define the run: a checkpoint made with others cannot be resumed.
     IDENTITY = ("arch", "scenes", "shard_size", "image_size", "steps", "batch_size", "lr", "weight_decay",
                 "warmup_steps", "seed")
+    # Settings added after the shipped VLM was trained: part of the identity only when changed,
+    # so that its checkpoints and config still match.
+    ADDED = {"pendulum_scenes": 0}
 
     def identity(self) -> dict:
-        return {k: getattr(self, k) for k in self.IDENTITY}
+        d = {k: getattr(self, k) for k in self.IDENTITY}
+        d.update({k: getattr(self, k) for k, default in self.ADDED.items() if getattr(self, k) != default})
+        return d
+
+
+def check_config(cfg: PretrainConfig) -> None:
+    """Refuse what cannot be a run: a negative pendulum count, or a pendulum VLM written over the shipped one."""
+    if cfg.pendulum_scenes < 0:
+        raise ValueError(f"--pendulum-scenes must be >= 0, got {cfg.pendulum_scenes}")
+    if cfg.pendulum_scenes and Path(cfg.out).resolve() == SHIPPED_SCENE_DIR.resolve():
+        raise ValueError("--pendulum-scenes trains another VLM than the shipped one: name its folder with --out "
+                         "(e.g. --out runs/vlm-pendulum)")
 
 
 # --- training ----------------------------------------------------------------------------------
@@ -76,9 +100,14 @@ def learning_rate(step: int, cfg: PretrainConfig) -> float:
     return warmup_cosine(step, cfg.lr, cfg.warmup_steps, cfg.steps)
 
 
-def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfig):
-    """Images (uint8 NHWC) and captions of one step, a pure function of (seed, step)."""
+def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfig, pendulum: dict | None = None):
+    """Images (uint8 NHWC) and captions of one step, a pure function of (seed, step).
+
+    ``pendulum``: pendulum renders (:func:`zsrm.data.pendulum_renders.render_pendulum_scenes`)
+    drawn into the batch with ``data``'s rows, uniformly over both."""
     rng = np.random.default_rng([cfg.seed, 1, step])
+    if pendulum is not None:
+        return _mixed_batch(data, train_rows, pendulum, rng, cfg)
     rows = train_rows[rng.choice(len(train_rows), min(cfg.batch_size, len(train_rows)), replace=False)]
     captions = [presence_caption(visible_colours(data["visible"][r], cfg.image_size), SHAPES[data["shape"][r]], rng)
                 for r in rows]
@@ -87,6 +116,28 @@ def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfi
     flip = rng.random(len(rows)) < 0.5
     images = np.where(flip[:, None, None, None], images[:, :, ::-1], images)
     return np.ascontiguousarray(images), captions
+
+
+def _mixed_batch(data: dict, train_rows: np.ndarray, pendulum: dict, rng: np.random.Generator,
+                 cfg: PretrainConfig):
+    """A batch drawn from the presence rows and the pendulum renders together; half the images
+    mirrored, a mirrored pendulum's lean captioned as the other side."""
+    total = len(train_rows) + len(pendulum["images"])
+    picks = rng.choice(total, min(cfg.batch_size, total), replace=False)
+    flips = rng.random(len(picks)) < 0.5
+    images, captions = [], []
+    for k, flip in zip(picks, flips):
+        if k < len(train_rows):
+            r = train_rows[k]
+            image = data["images"][r]
+            captions.append(presence_caption(visible_colours(data["visible"][r], cfg.image_size),
+                                             SHAPES[data["shape"][r]], rng))
+        else:
+            j = k - len(train_rows)
+            image, pose = pendulum["images"][j], POSES[pendulum["pose"][j]]
+            captions.append(pendulum_caption(mirrored(pose) if flip else pose, rng))
+        images.append(image[:, ::-1] if flip else image)
+    return np.ascontiguousarray(np.stack(images)), captions
 
 
 def contrastive_step_loss(model: SceneVLM, images: np.ndarray, captions: list[str]) -> torch.Tensor:
@@ -109,11 +160,46 @@ def _load_checkpoint(folder: Path, cfg: PretrainConfig):
     return model, opt, state["step"], state["log"]
 
 
-def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True) -> SceneVLM:
+def _provenance(cfg: PretrainConfig, train_images: int, log: list[dict], pendulum: dict | None) -> dict:
+    """What the saved model's config.json says about its training (the pendulum's part only if any)."""
+    meta = {
+        "trained_by": "zsrm pretrain-vlm",
+        "config": cfg.identity(),
+        "train_images": int(train_images),
+        "train_scenes": cfg.scenes,
+        "colours": list(COLOURS),
+        "final_loss": log[-1]["loss"] if log else None,
+        "train_seconds": log[-1]["seconds"] if log else None,
+    }
+    if pendulum is not None:
+        meta.update({"pendulum_images": int(len(pendulum["images"])), "pendulum_poses": list(POSES)})
+    return meta
+
+
+def _check_pendulum(cfg: PretrainConfig, data: dict, pendulum: dict | None) -> dict | None:
+    """The pendulum renders a run of ``cfg`` trains on (its first ``pendulum_scenes``), checked."""
+    check_config(cfg)
+    if bool(cfg.pendulum_scenes) != (pendulum is not None):
+        raise ValueError(f"pendulum_scenes is {cfg.pendulum_scenes} but pendulum renders were "
+                         f"{'not ' if pendulum is None else ''}given")
+    if pendulum is None:
+        return None
+    pendulum = {k: v[:cfg.pendulum_scenes] for k, v in pendulum.items()}
+    if pendulum["images"].shape[1:3] != data["images"].shape[1:3]:
+        raise ValueError(f"pendulum renders are {pendulum['images'].shape[1]} px, the scenes "
+                         f"{data['images'].shape[1]} px")
+    return pendulum
+
+
+def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True, pendulum: dict | None = None) -> SceneVLM:
     """Train (or resume training) a scene VLM on renders ``data`` (see
-    :func:`zsrm.data.renders.render_presence_scenes`) and save it to ``cfg.out``."""
+    :func:`zsrm.data.renders.render_presence_scenes`) and save it to ``cfg.out``; with
+    ``cfg.pendulum_scenes``, also on the pendulum renders ``pendulum`` (see
+    :func:`zsrm.data.pendulum_renders.render_pendulum_scenes`)."""
     from tqdm import tqdm
 
+    pendulum = _check_pendulum(cfg, data, pendulum)
+    extra = {} if pendulum is None else {"pendulum": pendulum}
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     work = Path(cfg.workdir)
@@ -130,14 +216,15 @@ def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True) -> SceneVLM
         opt, start, log = _optimizer(model, cfg), 0, []
     model.train()
     # Encode every possible caption once: the frozen sentence encoder then never runs again.
-    model.sentence_features([c for s in SHAPES for c in all_presence_captions(s)])
+    model.sentence_features([c for s in SHAPES for c in all_presence_captions(s)]
+                            + (all_pendulum_captions() if pendulum is not None else []))
 
     t0, elapsed_before = time.time(), (log[-1]["seconds"] if log else 0.0)
     bar = tqdm(total=cfg.steps, initial=start, desc="pretrain scene VLM", unit="step", disable=not progress)
     for step in range(start, cfg.steps):
         for group in opt.param_groups:
             group["lr"] = learning_rate(step, cfg)
-        images, captions = make_batch(data, train_rows, step, cfg)
+        images, captions = make_batch(data, train_rows, step, cfg, **extra)
         loss = contrastive_step_loss(model, images, captions)
         opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -152,15 +239,7 @@ def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True) -> SceneVLM
     bar.close()
 
     model.eval()
-    model.meta = {
-        "trained_by": "zsrm pretrain-vlm",
-        "config": cfg.identity(),
-        "train_images": int(len(train_rows)),
-        "train_scenes": cfg.scenes,
-        "colours": list(COLOURS),
-        "final_loss": log[-1]["loss"] if log else None,
-        "train_seconds": log[-1]["seconds"] if log else None,
-    }
+    model.meta = _provenance(cfg, len(train_rows), log, pendulum)
     model.save(cfg.out)
     with atomic_path(work / "log.csv") as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=["step", "loss", "seconds"])
@@ -169,4 +248,4 @@ def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True) -> SceneVLM
     return model
 
 
-__all__ = ["PretrainConfig", "pretrain", "make_batch", "learning_rate"]
+__all__ = ["PretrainConfig", "pretrain", "make_batch", "learning_rate", "check_config"]
