@@ -70,11 +70,11 @@ def run_episode(env, policy: PolicyMaker, seed: int, max_steps: int | None = Non
     return {"success": bool(info["is_success"]), "steps_in_goal": steps_in_goal, "steps": steps}
 
 
-def run_vec_episodes(venv, act: Callable[[dict], np.ndarray]) -> dict:
+def run_vec_episodes(venv, act: Callable[[dict], np.ndarray], key: str = "oracle_steps") -> dict:
     """One episode in each env of a vectorised env (SB3 ``VecEnv``), all stepped together:
     ``act`` maps a batch of observations to a batch of actions. Returns each episode's oracle
-    reward (the control steps in the goal relation, ``info["oracle_steps"]``) and whether the
-    goal held at its end.
+    reward (the sum of ``info[key]``: by default the control steps in the goal relation; the
+    pendulum's env reward with ``key="oracle_reward"``) and whether the goal held at its end.
     """
     n = venv.num_envs
     obs = venv.reset()
@@ -83,7 +83,7 @@ def run_vec_episodes(venv, act: Callable[[dict], np.ndarray]) -> dict:
         obs, _, dones, infos = venv.step(act(obs))
         for i, info in enumerate(infos):
             if running[i]:
-                totals[i] += info.get("oracle_steps", int(info["is_success"]))
+                totals[i] += info.get(key, int(info["is_success"]))
                 if dones[i]:
                     success[i], running[i] = bool(info["is_success"]), False
     return {"episode_rewards": totals.tolist(), "successes": success.tolist()}

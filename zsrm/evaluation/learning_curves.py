@@ -1,5 +1,7 @@
 """Learning curves of a sweep (Figure 6 of the paper): one panel per task, one line per reward,
-the mean and standard error over seeds of the oracle episode reward against env steps.
+the mean and standard error over seeds of the oracle episode reward against env steps; and
+Figure 4, the double pendulum's panel with the base and oracle rewards
+(:func:`plot_figure4`), whose oracle metric is the env's episode return.
 
 >>> summary = {"stack": {"oracle": {"curve": [{"env_steps": 1000, "mean": 3.0, "se": 1.0}],
 ...                                 "final_mean": 3.0, "final_se": 1.0, "seeds": 3}}}
@@ -16,6 +18,15 @@ from zsrm.evaluation.plots import pyplot, save_figure
 
 REWARD_COLOURS = {"zsrm": "tab:blue", "oracle": "tab:green", "vice": "tab:purple", "base": "tab:orange",
                   "curiosity": "tab:red", "random": "tab:gray"}
+PENDULUM = "pendulum"  # the catalogue name of the double pendulum's task (Figure 4)
+FIGURE4_REWARDS = ("base", "oracle")
+
+
+def y_label(task: str) -> str:
+    """What a task's oracle metric is: the steps in the goal relation, or the pendulum's return."""
+    if task == PENDULUM:
+        return "oracle episode return (env reward, 100 steps)"
+    return "oracle episode reward (of 100)"
 
 
 def plot_learning_curves(summary: dict, path: str | Path, title: str = "") -> Path:
@@ -45,9 +56,30 @@ def plot_learning_curves(summary: dict, path: str | Path, title: str = "") -> Pa
         ax.set_ylim(bottom=0)
         ax.set_xlabel("env steps")
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("oracle episode reward (of 100)")
+        if ax is axes[0][0] or y_label(task) != y_label(tasks[0]):
+            ax.set_ylabel(y_label(task))
     for ax in axes[0]:  # each panel lists its own rewards and seeds (they differ while a sweep runs)
         ax.legend(fontsize=7, loc="upper left")
     if title:
         fig.suptitle(title)
     return save_figure(fig, path)
+
+
+def plot_figure4(summary: dict, path: str | Path, rewards=FIGURE4_REWARDS) -> Path:
+    """Figure 4: the double pendulum with the base and oracle rewards, the mean and standard
+    error over seeds of the oracle episode return against env steps, from a sweep's summary
+    (``summary["pendulum"][reward]``, :func:`zsrm.rl.sweep.gather`). Of ``rewards``, those the
+    summary holds are drawn; ValueError if it holds none of them.
+
+    >>> curve = [{"env_steps": 1000, "mean": 90.0, "se": 5.0}, {"env_steps": 2000, "mean": 300.0, "se": 20.0}]
+    >>> summary = {"pendulum": {r: {"curve": curve, "final_mean": 300.0, "final_se": 20.0, "seeds": 3}
+    ...                         for r in ("base", "oracle")}}
+    >>> plot_figure4(summary, "/tmp/zsrm-doctest-figure4.png").name
+    'zsrm-doctest-figure4.png'
+    """
+    results = {r: summary.get(PENDULUM, {})[r] for r in rewards if r in summary.get(PENDULUM, {})}
+    if not results:
+        raise ValueError(f"the summary holds no {PENDULUM} runs with the {' or '.join(rewards)} reward: "
+                         f"run zsrm sweep --tasks {PENDULUM} --rewards {' '.join(rewards)} first")
+    return plot_learning_curves({PENDULUM: results}, path,
+                                title="double inverted pendulum (Figure 4)")

@@ -76,12 +76,17 @@ class Rollout:
         return 0
 
 
+def absolute_if_folder(spec: str) -> str:
+    """A model spec that names an existing folder, made absolute; any other spec unchanged."""
+    return str(Path(spec).resolve()) if spec and Path(spec).is_dir() else spec
+
+
 @dataclass
 class Sweep:
     """Train tasks x rewards x seeds on Ray Tune (resumable), then gather the summary and plot."""
 
     tasks: tuple[str, ...] = SWEEP_TASKS  # catalogue tasks or goal sentences
-    rewards: tuple[str, ...] = ("oracle", "zsrm", "random")  # rewards, of: oracle, zsrm, random
+    rewards: tuple[str, ...] = ("oracle", "zsrm", "random")  # rewards, of: oracle, zsrm, base, vice, curiosity, random
     seeds: tuple[int, ...] = (0, 1, 2)  # seeds per task and reward
     root: str = "runs/rl"  # one folder per trial under here (shared storage on a cluster)
     steps: int = 300_000  # env steps per trial
@@ -102,7 +107,9 @@ class Sweep:
             raise ValueError(f"unknown rewards {', '.join(sorted(unknown))}; choose from {', '.join(REWARDS)}")
         check_writable(self.root, folder=True)
         check_writable(self.out)
-        overrides = {**self.train, "steps": self.steps, "reward_model": self.reward_model, "vlm": self.vlm}
+        # A model folder by its absolute path: Ray Tune runs each trial in its own working directory.
+        overrides = {**self.train, "steps": self.steps, "reward_model": absolute_if_folder(self.reward_model),
+                     "vlm": absolute_if_folder(self.vlm)}
         out = Path(self.out)
         if not self.gather_only:
             ran = sweep(self.root, self.tasks, self.rewards, self.seeds, overrides, num_cpus=self.num_cpus,
@@ -125,26 +132,43 @@ class Sweep:
     def meta(self, finished: int, planned: int) -> dict:
         return {"trials_finished": finished, "trials_planned": planned,
                 "metric": "oracle episode reward: control steps of 100 in the goal relation, mean over 30 "
-                          "evaluation episodes per seed, then mean and s.e. over seeds",
+                          "evaluation episodes per seed, then mean and s.e. over seeds"
+                          + ("; pendulum: the oracle episode return, the env's reward summed over an episode of at "
+                             "most 100 control steps" if "pendulum" in self.tasks else ""),
                 "command": f"zsrm sweep --tasks {' '.join(self.tasks)} --rewards {' '.join(self.rewards)} "
-                           f"--seeds {' '.join(map(str, self.seeds))} --steps {self.steps} --out {self.out}",
+                           f"--seeds {' '.join(map(str, self.seeds))} --steps {self.steps} --out {self.out}"
+                           + (f" --vlm {self.vlm}" if self.vlm != "scene" else ""),
                 "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU"}
 
 
 @dataclass
 class Plot:
-    """Figure 6 of the paper from a sweep's gathered summary: one panel per task, one line per reward."""
+    """Figures 6 and 4 of the paper from a sweep's gathered summary.
+
+    Figure 6: one panel per manipulation task, one line per reward. Figure 4 (with --figure4):
+    the double pendulum with the base and oracle rewards, e.g. from the pendulum's own sweep:
+    zsrm plot --summary results/rl/pendulum.json --figure4 results/rl/figure4.png
+    """
 
     summary: str = "results/rl/learning.json"  # a summary written by zsrm sweep
-    figure6: str = "results/rl/figure6.png"  # where to write Figure 6
+    figure6: str = "results/rl/figure6.png"  # where to write Figure 6 (when the summary holds manipulation tasks)
+    figure4: str | None = None  # where to write Figure 4, the pendulum's base vs oracle (needs pendulum runs)
 
     def run(self) -> int:
-        from zsrm.evaluation.learning_curves import plot_learning_curves
+        from zsrm.evaluation.learning_curves import PENDULUM, plot_figure4, plot_learning_curves
         from zsrm.vlm.files import read_json
 
-        check_writable(self.figure6)
+        check_writable(self.figure4 or self.figure6)  # before any work
         summary = {task: rewards for task, rewards in read_json(self.summary).items() if task != "meta"}
         if not summary:
             raise ValueError(f"{self.summary} holds no finished trials; run zsrm sweep first")
-        print(f"wrote {plot_learning_curves(summary, self.figure6, title='oracle episode reward while training')}")
+        manipulation = {task: rewards for task, rewards in summary.items() if task != PENDULUM}
+        if not self.figure4 and not manipulation:
+            raise ValueError(f"{self.summary} holds only the {PENDULUM}: plot it with --figure4 PATH")
+        if self.figure4:
+            print(f"wrote {plot_figure4(summary, self.figure4)}")
+        if manipulation:
+            check_writable(self.figure6)
+            written = plot_learning_curves(manipulation, self.figure6, title="oracle episode reward while training")
+            print(f"wrote {written}")
         return 0

@@ -5,7 +5,12 @@
 * ``"dot"``: the raw dot product of the unnormalised embeddings (the paper's formula);
 * ``"cosine"``: the dot product of the L2-normalised embeddings;
 * ``"projection"``: goal-baseline regularisation of VLM-RMs (Rocamonde et al. 2023,
-  Definition 1), see :func:`projection_reward`.
+  Definition 1), see :func:`projection_reward`;
+* ``"binary"``: 1 when the goal sentence's cosine beats every one of ``negatives`` (sentences
+  for what the frame could show instead), else 0: the binarisation of the full reward
+  (:func:`zsrm.rewards.binarised.decide`) on the base VLM's scores. The pendulum's base reward
+  (Figure 4) is this, with the other poses as negatives (:data:`zsrm.tasks.pendulum.NEGATIVES`):
+  never negative, so that an episode the env ends early earns less.
 """
 from __future__ import annotations
 
@@ -18,7 +23,7 @@ from torch.nn import functional as F
 from zsrm.rewards.interface import RewardModel, check_goal, check_images
 from zsrm.vlm.text_cache import TextEmbeddingCache
 
-MODES = ("dot", "cosine", "projection")
+MODES = ("dot", "cosine", "projection", "binary")
 
 
 def projection_reward(x: torch.Tensor, goal: torch.Tensor, baseline: torch.Tensor, alpha: float) -> torch.Tensor:
@@ -59,8 +64,9 @@ class BaseReward(RewardModel):
 
     Images are encoded in batches of ``batch_size`` (one forward for all envs of a step); goal
     and baseline embeddings come from a text cache (``cache_texts=False`` re-encodes them at
-    every call, the simple way). ``mode`` is ``"dot"``, ``"cosine"`` or ``"projection"`` (needs
-    ``baseline``, a sentence describing the scene without the goal, and ``alpha`` in [0, 1]).
+    every call, the simple way). ``mode`` is ``"dot"``, ``"cosine"``, ``"projection"`` (needs
+    ``baseline``, a sentence describing the scene without the goal, and ``alpha`` in [0, 1]) or
+    ``"binary"`` (needs ``negatives``, sentences the goal must beat).
 
     >>> import gymnasium as gym, zsrm.envs
     >>> from zsrm.vlm import load_vlm
@@ -77,9 +83,18 @@ class BaseReward(RewardModel):
     name = "base"
 
     def __init__(self, vlm, camera: str = "front", mode: str = "dot", baseline: str | None = None,
-                 alpha: float = 0.5, batch_size: int = 64, cache_texts: bool = True):
+                 alpha: float = 0.5, batch_size: int = 64, cache_texts: bool = True,
+                 negatives: Sequence[str] | None = None):
         if mode not in MODES:
             raise ValueError(f"unknown mode {mode!r}; choose one of {', '.join(MODES)}")
+        if mode == "binary":
+            if isinstance(negatives, str) or not negatives:
+                raise ValueError("mode 'binary' needs negatives: sentences the goal must beat "
+                                 "(e.g. 'a fallen pendulum')")
+            negatives = tuple(check_goal(n) for n in negatives)
+        elif negatives is not None:
+            raise ValueError(f"negatives are used only by mode 'binary', not {mode!r}")
+        self.negatives = negatives
         if mode == "projection":
             if baseline is None:
                 raise ValueError("mode 'projection' needs a baseline sentence (e.g. 'two pucks on a table')")
@@ -100,9 +115,13 @@ class BaseReward(RewardModel):
         self.text_cache = TextEmbeddingCache(lambda texts: vlm.encode_texts(texts, normalize=False),
                                              enabled=cache_texts)
 
-    def prepare(self, goal: str) -> None:
+    def texts(self, goal: str) -> list[str]:
+        """The sentences scored: the goal, then the baseline or the negatives."""
         goal = check_goal(goal)
-        self.text_cache([goal] if self.baseline is None else [goal, self.baseline])
+        return [goal, *([self.baseline] if self.baseline is not None else []), *(self.negatives or ())]
+
+    def prepare(self, goal: str) -> None:
+        self.text_cache(self.texts(goal))
 
     @torch.no_grad()
     def image_embeddings(self, images: np.ndarray) -> torch.Tensor:
@@ -115,14 +134,17 @@ class BaseReward(RewardModel):
     @torch.no_grad()
     def score(self, images: np.ndarray, goal: str) -> np.ndarray:
         """Rewards ``(N,)`` of frames ``(N, H, W, 3) uint8`` for a goal sentence."""
-        goal = check_goal(goal)
         img = self.image_embeddings(images).float()
-        texts = self.text_cache([goal] if self.baseline is None else [goal, self.baseline])
-        texts = texts.to(img.device).float()
+        texts = self.text_cache(self.texts(goal)).to(img.device).float()
         if self.mode == "dot":
             r = img @ texts[0]
         elif self.mode == "cosine":
             r = F.normalize(img, dim=-1) @ F.normalize(texts[0], dim=-1)
+        elif self.mode == "binary":
+            from zsrm.rewards.binarised import decide
+
+            sims = F.normalize(img, dim=-1) @ F.normalize(texts, dim=-1).T
+            return decide(sims.cpu().numpy())["binary"]
         else:
             r = projection_reward(img, texts[0], texts[1], self.alpha)
         return r.cpu().numpy().astype(np.float32)
@@ -133,4 +155,5 @@ class BaseReward(RewardModel):
 
     def __repr__(self) -> str:
         extra = f", baseline={self.baseline!r}, alpha={self.alpha}" if self.mode == "projection" else ""
+        extra += f", negatives={list(self.negatives)!r}" if self.negatives else ""
         return f"BaseReward(vlm={getattr(self.vlm, 'backend', type(self.vlm).__name__)!r}, camera={self.camera!r}, mode={self.mode!r}{extra})"

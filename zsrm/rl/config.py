@@ -14,10 +14,12 @@ REWARDS = ("oracle", "zsrm", "base", "vice", "curiosity", "random")
 @dataclass
 class TrainConfig:
     goal: str = "stack"
-    """goal sentence or catalogue task name (stack, place_right, push_close, ...)"""
+    """goal sentence or catalogue task name (stack, place_right, push_close, ..., pendulum: the double
+    inverted pendulum of Figure 4, with the base, oracle, curiosity or random reward)"""
     reward: Literal["oracle", "zsrm", "base", "vice", "curiosity", "random"] = "oracle"
     """reward the policy learns from: oracle (privileged), zsrm (the full reward model), base (the VLM's
-    image-goal cosine), vice (privileged goal classifier), curiosity (ICM, no goal), random (no learning)"""
+    image-goal cosine; for the pendulum 1 when the goal beats the other poses' sentences), vice (privileged
+    goal classifier), curiosity (ICM, no goal), random (no learning)"""
     seed: int = 0
     """seed of the policy, the training envs and the evaluation envs"""
     steps: int = 300_000
@@ -28,7 +30,8 @@ class TrainConfig:
     zsrm_output: Literal["binary", "margin"] = "binary"
     """for --reward zsrm: binary (the paper's), or margin (dense: goal score minus best negative)"""
     vlm: str = "scene"
-    """VLM whose frozen image trunk (its Grad-CAM layer) the policy sees through"""
+    """VLM whose frozen image trunk (its Grad-CAM layer) the policy sees through, and that scores the
+    base reward (for the pendulum: a folder of zsrm pretrain-vlm --pendulum-scenes)"""
     n_envs: int = 8
     """parallel training envs (one process, one batched reward call per step)"""
     action_repeat: int = 2
@@ -88,8 +91,12 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.start not in ("auto", "above", "around"):
             raise ValueError(f"unknown start {self.start!r}; choose auto, above or around")
+        relation = goal_relation(self.goal)
         if self.start == "auto":
-            self.start = "around" if goal_relation(self.goal) in STACKING else "above"
+            self.start = "around" if relation in STACKING else "above"
+        if relation is None and self.reward in ("zsrm", "vice"):
+            raise ValueError(f"the {self.reward} reward reads a spatial relation; the pendulum trains with "
+                             "base, oracle, curiosity or random")
         if self.reward == "zsrm":  # record which shipped student: a retrained one is another run
             import zsrm.fullmodel  # noqa: F401  (registers the shipped student)
             from zsrm.vlm.factory import pinned

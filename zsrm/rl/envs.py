@@ -1,5 +1,9 @@
 """Vectorised envs for training and evaluation: the goal's scene, seen through the camera its
-relation is read on, with the reward (oracle or zsrm) in one batched call per step."""
+relation is read on, with the reward (oracle or zsrm) in one batched call per step.
+
+The double pendulum (goal ``pendulum``, Figure 4) is one of them: its one camera (front), no
+start spread, episodes capped at 100 control steps like the other scenes (the env ends one
+earlier when the pendulum falls; gymnasium's own cap of 1000 never comes)."""
 from __future__ import annotations
 
 import gymnasium as gym
@@ -14,25 +18,37 @@ EPISODE_STEPS = 100
 
 
 def task_entry(goal: str) -> CatalogueEntry:
-    entry = resolve(goal)
-    if entry.env_id == PENDULUM_ID:
-        raise ValueError("zsrm train runs the spatial tasks; the pendulum has no relation to read")
-    return entry
+    """The catalogue entry of a goal: a spatial task, or the pendulum."""
+    return resolve(goal)
+
+
+def is_pendulum(goal: str) -> bool:
+    return task_entry(goal).env_id == PENDULUM_ID
 
 
 def goal_camera(goal: str) -> str:
-    """The camera the goal's relation is read on (Table 1): front, left or tilted."""
-    return RELATIONS[task_entry(goal).task.relation].camera
+    """The camera the goal's relation is read on (Table 1): front, left or tilted; the
+    pendulum's one camera, front."""
+    entry = task_entry(goal)
+    if entry.env_id == PENDULUM_ID:
+        return "front"
+    return RELATIONS[entry.task.relation].camera
 
 
 def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen") -> DummyVecEnv:
     """``n_envs`` scenes of the goal in one process, seeded ``seed, seed + 1, ...``."""
     entry = task_entry(cfg.goal)
     kwargs = dict(task=entry.goal, cameras=(goal_camera(cfg.goal),), image_size=cfg.image_size,
-                  spread=spread, action_repeat=cfg.action_repeat)
+                  action_repeat=cfg.action_repeat)
+    if entry.env_id == PENDULUM_ID:
+        if spread != "seen":
+            raise ValueError(f"the pendulum has no start spread to widen (got {spread!r}); it starts as "
+                             "gymnasium's does")
+    else:
+        kwargs["spread"] = spread
     if cfg.start != "above":
         if entry.env_id != TABLETOP_ID:
-            raise ValueError(f"start {cfg.start!r} is for the tabletop's blocks; {cfg.goal!r} is a pushing task")
+            raise ValueError(f"start {cfg.start!r} is for the tabletop's blocks; {cfg.goal!r} is not a tabletop task")
         kwargs["start"] = cfg.start
     decisions = EPISODE_STEPS // cfg.action_repeat
     venv = DummyVecEnv([lambda: gym.make(entry.env_id, max_episode_steps=decisions, **kwargs)
@@ -42,9 +58,11 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen") -> 
 
 
 def make_reward(cfg: TrainConfig, folder=None):
-    """The RewardModel that ``cfg.reward`` names: oracle, zsrm, base (the scene VLM's cosine of
-    the frame and the goal, paper 2.1) or vice (a goal classifier fitted on true goal images,
-    kept in ``folder``); None for the rewards that are not a RewardModel (random, curiosity)."""
+    """The RewardModel that ``cfg.reward`` names: oracle, zsrm, base (the VLM ``cfg.vlm``'s cosine
+    of the frame and the goal, paper 2.1; for the pendulum binarised: 1 when the goal beats the
+    other poses' sentences, :data:`zsrm.tasks.pendulum.NEGATIVES`) or vice (a goal classifier
+    fitted on true goal images, kept in ``folder``); None for the rewards that are not a
+    RewardModel (random, curiosity)."""
     from zsrm.rewards import BaseReward, OracleReward, ZSRMReward
 
     if cfg.reward == "oracle":
@@ -56,6 +74,10 @@ def make_reward(cfg: TrainConfig, folder=None):
     if cfg.reward == "base":
         from zsrm.vlm import load_vlm
 
+        if is_pendulum(cfg.goal):
+            from zsrm.tasks.pendulum import NEGATIVES
+
+            return BaseReward(load_vlm(cfg.vlm), camera="front", mode="binary", negatives=NEGATIVES)
         return BaseReward(load_vlm(cfg.vlm), camera=goal_camera(cfg.goal), mode="cosine")
     if cfg.reward == "vice":
         from zsrm.rl.vice import vice_reward

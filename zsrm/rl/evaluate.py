@@ -2,7 +2,11 @@
 ``zsrm rollout`` (a saved or random policy, with a GIF of its first episode).
 
 The oracle episode reward is the number of the episode's 100 control steps in which the goal
-relation holds (paper 3.2): it reads the true state and is used for evaluation only.
+relation holds (paper 3.2): it reads the true state and is used for evaluation only. For the
+double pendulum (Figure 4) it is the oracle episode return: the sum of gymnasium's reward
+(alive bonus 10 minus distance and velocity penalties, about 9.35 per upright step) over an
+episode of at most 100 control steps (0.05 s each; :data:`zsrm.rl.envs.EPISODE_STEPS`, the same
+cap as the other scenes), which ends earlier when the pendulum falls: at most about 935.
 """
 from __future__ import annotations
 
@@ -13,7 +17,7 @@ import numpy as np
 
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.rl.config import TrainConfig
-from zsrm.rl.envs import goal_camera, make_vec
+from zsrm.rl.envs import goal_camera, is_pendulum, make_vec
 from zsrm.vlm.files import atomic_path
 
 EVAL_SEED = 1_000_000  # evaluation envs: seeds far from the training envs'
@@ -40,7 +44,7 @@ def evaluate(act, cfg: TrainConfig, episodes: int, seed: int, spread: str = "see
     if wrap is not None:
         venv = wrap(venv)
     try:
-        out = run_vec_episodes(venv, act)
+        out = run_vec_episodes(venv, act, key="oracle_reward" if is_pendulum(cfg.goal) else "oracle_steps")
     finally:
         venv.close()
     mean, se = mean_se(out["episode_rewards"])
