@@ -24,9 +24,8 @@ from typing import Iterable
 
 import numpy as np
 
-from zsrm.data.shards import load_npz, save_npz
+from zsrm.data.renders import load_cached_shards
 from zsrm.tasks.pendulum import POSES, pose_class, tip_offset
-from zsrm.vlm.files import check_writable, read_json, write_json
 
 STREAM = 2  # seed stream apart from the presence renders' (0 train, 1 eval)
 CART_RANGE = 0.8  # |cart x| of the renders (the rail ends at 1)
@@ -108,30 +107,10 @@ def load_pendulum_renders(folder: str | Path, scenes: int, shard_size: int, seed
                           progress: bool = True) -> dict:
     """The first ``scenes`` pendulum scenes, rendered once and cached in ``folder`` shard by shard
     (``shard-0000.npz``, ...); arrays as :func:`render_pendulum_scenes` returns them."""
-    from tqdm import tqdm
-
-    folder = check_writable(folder, folder=True)
-    manifest = folder / "manifest.json"
     spec = {"kind": "pendulum", "seed": seed, "shard_size": shard_size, "image_size": image_size}
-    if manifest.exists() and read_json(manifest, "the settings of cached pendulum renders") != spec:
-        raise ValueError(f"{folder} holds pendulum renders made with other settings ({manifest.read_text().strip()}); "
-                         "use another --workdir or --fresh")
-    write_json(manifest, spec, indent=None)
-    shards = []
-    n_shards = math.ceil(scenes / shard_size)
-    with tqdm(total=n_shards * shard_size, desc="render pendulum", unit="scene", disable=not progress) as bar:
-        for s in range(n_shards):
-            path = folder / f"shard-{s:04d}.npz"
-            if path.exists():
-                data = load_npz(path)
-                bar.update(shard_size)
-            else:  # always whole shards, so that a shard means the same scenes in every run
-                data = render_pendulum_scenes(range(s * shard_size, (s + 1) * shard_size), seed=seed,
-                                              size=image_size, progress=bar.update)
-                save_npz(path, **data)
-            keep = data["scene_index"] < min(scenes, (s + 1) * shard_size)
-            shards.append({k: v[keep] for k, v in data.items()})
-    return {k: np.concatenate([sh[k] for sh in shards]) for k in shards[0]}
+    return load_cached_shards(folder, spec, scenes, shard_size, "pendulum renders", "render pendulum",
+                              lambda indices, bar: render_pendulum_scenes(indices, seed=seed, size=image_size,
+                                                                          progress=bar), progress)
 
 
 __all__ = ["pendulum_plan", "render_pendulum_scenes", "load_pendulum_renders", "PendulumPoser"]

@@ -130,26 +130,35 @@ def load_renders(folder: str | Path, scenes: int, shard_size: int, seed: int = 0
                  progress: bool = True) -> dict:
     """The first ``scenes`` training scenes, rendered once and cached in ``folder`` shard by shard
     (``shard-0000.npz``, ...); arrays as :func:`render_presence_scenes` returns them."""
+    spec = {"seed": seed, "shard_size": shard_size, "image_size": image_size, "stream": "train"}
+    return load_cached_shards(folder, spec, scenes, shard_size, "renders", "render scenes",
+                              lambda indices, bar: render_presence_scenes(indices, seed=seed, size=image_size,
+                                                                          progress=bar), progress)
+
+
+def load_cached_shards(folder: str | Path, spec: dict, scenes: int, shard_size: int, what: str, desc: str,
+                       render, progress: bool = True) -> dict:
+    """The first ``scenes`` scenes of ``render(indices, progress)``, rendered once and cached in
+    ``folder`` shard by shard under a manifest holding ``spec`` (a folder made with another spec
+    is refused: ``what`` names its contents in the message), so a killed run keeps its shards."""
     from tqdm import tqdm
 
     folder = check_writable(folder, folder=True)
     manifest = folder / "manifest.json"
-    spec = {"seed": seed, "shard_size": shard_size, "image_size": image_size, "stream": "train"}
-    if manifest.exists() and read_json(manifest, "the settings of cached renders") != spec:
-        raise ValueError(f"{folder} holds renders made with other settings ({manifest.read_text().strip()}); "
+    if manifest.exists() and read_json(manifest, f"the settings of cached {what}") != spec:
+        raise ValueError(f"{folder} holds {what} made with other settings ({manifest.read_text().strip()}); "
                          "use another --workdir or --fresh")
     write_json(manifest, spec, indent=None)
     shards = []
     n_shards = math.ceil(scenes / shard_size)
-    with tqdm(total=n_shards * shard_size, desc="render scenes", unit="scene", disable=not progress) as bar:
+    with tqdm(total=n_shards * shard_size, desc=desc, unit="scene", disable=not progress) as bar:
         for s in range(n_shards):
             path = folder / f"shard-{s:04d}.npz"
             if path.exists():
                 data = load_npz(path)
                 bar.update(shard_size)
             else:  # always whole shards, so that a shard means the same scenes in every run
-                data = render_presence_scenes(range(s * shard_size, (s + 1) * shard_size), seed=seed,
-                                              size=image_size, progress=bar.update)
+                data = render(range(s * shard_size, (s + 1) * shard_size), bar.update)
                 save_npz(path, **data)
             keep = data["scene_index"] < min(scenes, (s + 1) * shard_size)
             shards.append({k: v[keep] for k, v in data.items()})
