@@ -104,3 +104,20 @@ def test_mean_se():
     assert mean_se([1.0]) == (1.0, 0.0)
     mean, se = mean_se([0.0, 2.0])
     assert mean == 1.0 and se == pytest.approx(1.0)
+
+
+def test_device_is_checked_and_kept_out_of_the_run_config(tmp_path):
+    import torch
+
+    from zsrm.rl.ppo import resolve_device
+
+    assert resolve_device("cpu") == "cpu"
+    assert resolve_device("auto") == ("cuda" if torch.cuda.is_available() else "cpu")
+    with pytest.raises(ValueError, match="expected cpu, cuda"):
+        resolve_device("tpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="sees no CUDA GPU"):
+            resolve_device("cuda")
+    cfg = TrainConfig(goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128, **TINY)
+    summary = train(cfg, tmp_path / "run", progress=False, device="auto")
+    assert "device" not in summary["config"]  # a run started on a GPU resumes on a CPU

@@ -34,6 +34,7 @@ class Train(TrainConfig):
     out: str | None = None  # run folder (default: runs/rl/<goal>-<reward>-<seed>)
     config: Literal["cpu", "paper"] = "cpu"  # preset: cpu (300k steps, 2 cores) or paper (200k steps, more envs)
     fresh: bool = False  # start over instead of resuming the run folder's checkpoint
+    device: str = "cpu"  # where the VLM trunk and PPO run: cpu, cuda, cuda:N or auto (not part of the run's config)
 
     def run(self) -> int:
         from zsrm.rl.ppo import train
@@ -41,7 +42,7 @@ class Train(TrainConfig):
         cfg = with_preset(self, self.config)
         out = Path(self.out or f"runs/rl/{cfg.goal.replace(' ', '_')}-{cfg.reward}-{cfg.seed}")
         check_writable(out, folder=True)
-        summary = train(cfg, out, fresh=self.fresh)
+        summary = train(cfg, out, fresh=self.fresh, device=self.device)
         print(f"{cfg.goal} with the {cfg.reward} reward, {summary['env_steps']} env steps: oracle episode reward "
               f"{summary['final_mean']:.1f} +- {summary['final_se']:.1f}, success {summary['final_success_rate']:.2f} "
               f"over {summary['final_episodes']} episodes")

@@ -42,10 +42,11 @@ class InverseDynamicsAux(BaseCallback):
     inverse-dynamics model on the rollout's consecutive frames."""
 
     def __init__(self, points_dim: int, action_dim: int, lr: float = 3e-4, epochs: int = 1, batch_size: int = 256,
-                 seed: int = 0):
+                 seed: int = 0, device: str = "cpu"):
         super().__init__()
         torch.manual_seed(seed)
-        self.model_inverse = InverseDynamics(points_dim, action_dim)
+        self.device = torch.device(device)
+        self.model_inverse = InverseDynamics(points_dim, action_dim).to(self.device)
         self.lr, self.epochs, self.batch_size = lr, epochs, batch_size
         self.optimizer = None
 
@@ -59,12 +60,15 @@ class InverseDynamicsAux(BaseCallback):
         buffer = self.model.rollout_buffer
         steps, envs = consecutive_pairs(buffer.episode_starts)
         low, high = self.model.action_space.low, self.model.action_space.high
-        actions = torch.as_tensor(np.clip(buffer.actions[steps, envs], low, high), dtype=torch.float32)
+        actions = torch.as_tensor(np.clip(buffer.actions[steps, envs], low, high), dtype=torch.float32,
+                                  device=self.device)
         losses = []
         for _ in range(self.epochs):
             for idx in np.array_split(np.random.permutation(len(steps)), max(1, len(steps) // self.batch_size)):
-                now = {k: torch.as_tensor(v[steps[idx], envs[idx]]) for k, v in buffer.observations.items()}
-                nxt = {k: torch.as_tensor(v[steps[idx] + 1, envs[idx]]) for k, v in buffer.observations.items()}
+                now = {k: torch.as_tensor(v[steps[idx], envs[idx]], device=self.device)
+                       for k, v in buffer.observations.items()}
+                nxt = {k: torch.as_tensor(v[steps[idx] + 1, envs[idx]], device=self.device)
+                       for k, v in buffer.observations.items()}
                 predicted = self.model_inverse(extractor.points(now), extractor.points(nxt))
                 loss = (predicted - actions[idx]).pow(2).mean()
                 self.optimizer.zero_grad()

@@ -49,7 +49,7 @@ class VecImageFeatures(VecEnvWrapper):
 
     @torch.no_grad()
     def features(self, images: np.ndarray) -> np.ndarray:
-        return self.vlm.image_trunk(self.vlm.preprocess(images)).float().numpy()
+        return self.vlm.image_trunk(self.vlm.preprocess(images)).float().cpu().numpy()
 
     def convert(self, images: np.ndarray) -> dict:
         """Camera frames (N, H, W, 3) uint8 -> the policy's observation (maps and CHW frames)."""

@@ -38,10 +38,10 @@ EVAL_FIELDS = ("env_steps", "mean", "se", "success_rate", "train_reward", "wall_
 FINAL_EPISODES = 30
 
 
-def build_ppo(cfg: TrainConfig, venv) -> PPO:
+def build_ppo(cfg: TrainConfig, venv, device: str = "cpu") -> PPO:
     return PPO("MultiInputPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, ent_coef=cfg.ent_coef,
-               clip_range=cfg.clip_range, policy_kwargs=policy_kwargs(cfg), seed=cfg.seed, device="cpu", verbose=0)
+               clip_range=cfg.clip_range, policy_kwargs=policy_kwargs(cfg), seed=cfg.seed, device=device, verbose=0)
 
 
 class EvalAndCheckpoint(BaseCallback):
@@ -106,10 +106,13 @@ def write_eval_csv(path: Path, rows: list[dict]) -> None:
         writer.writerows(rows)
 
 
-def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool = True, on_eval=None) -> dict:
+def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool = True, on_eval=None,
+          device: str = "cpu") -> dict:
     """Train (or resume) one PPO run; returns the summary written to ``out/summary.json``.
 
-    ``on_eval(row)`` is called after each evaluation (the sweep reports it to Ray Tune)."""
+    ``on_eval(row)`` is called after each evaluation (the sweep reports it to Ray Tune).
+    ``device`` ('cpu', 'cuda', 'auto') runs the VLM trunk and PPO's networks there; it is not
+    part of the run's config, so a run started on a GPU resumes on a CPU and the other way."""
     from stable_baselines3.common.logger import configure
     from tqdm import tqdm
 
@@ -124,7 +127,8 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     if cfg.reward == "random":
         return finish_random(cfg, out)
 
-    vlm = load_vlm(cfg.vlm)
+    device = resolve_device(device)
+    vlm = load_vlm(cfg.vlm).to(device)
     camera = goal_camera(cfg.goal)
     done_steps, rows = 0, []
     state = None if fresh else load_checkpoint(out / "checkpoint", cfg)
@@ -132,10 +136,10 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
         done_steps, rows = state["env_steps"], state["rows"]
     venv, extra_callbacks, extra_modules = rewarded_env(cfg, out, done_steps)
     venv = VecImageFeatures(venv, vlm, camera)
-    model = build_ppo(cfg, venv)
+    model = build_ppo(cfg, venv, device)
     if cfg.aux_inverse:
         points_dim = model.policy.features_extractor.out[0].in_features
-        aux = InverseDynamicsAux(points_dim, venv.action_space.shape[0], seed=cfg.seed)
+        aux = InverseDynamicsAux(points_dim, venv.action_space.shape[0], seed=cfg.seed, device=device)
         extra_callbacks, extra_modules = [*extra_callbacks, aux], {**extra_modules, "inverse.safetensors": aux.model_inverse}
     if state is not None:
         state["restore"](model, extra_modules)
@@ -155,6 +159,17 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     PolicyBundle(model.policy, cfg).save(out / "policy")
     save_checkpoint(out / "checkpoint", model, cfg, callback.env_steps(), rows, extra_modules)
     return write_summary(cfg, out, final, rows, callback.env_steps())
+
+
+def resolve_device(device: str) -> str:
+    """'auto' -> 'cuda' when torch sees a GPU, else 'cpu'; 'cuda' without one is an error."""
+    if device == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(f"--device {device}: torch sees no CUDA GPU on this machine (use cpu or auto)")
+    if device != "cpu" and not device.startswith("cuda"):
+        raise ValueError(f"--device {device!r}: expected cpu, cuda, cuda:N or auto")
+    return device
 
 
 def rewarded_env(cfg: TrainConfig, out: Path, done_steps: int):
