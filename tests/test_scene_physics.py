@@ -164,3 +164,15 @@ def test_the_zsrm_reward_on_a_scene_with_a_distractor():
     rewards = reward({"front": np.stack(frames)}, goal)
     assert rewards[0] == 0 and truth[-1] and rewards[-1] == 1  # 0 at the start, 1 once stacked
     assert (rewards == np.array(truth)).mean() > 0.85
+
+
+@pytest.mark.parametrize("spread", ["seen", "unseen"])
+def test_push_close_starts_apart_with_the_pusher_clear_behind_the_mover(spread):
+    env = PushingEnv(task="push_close", image_size=16, spread=spread)
+    for seed in range(40):
+        env.reset(seed=seed)
+        mover, anchor = (env.object_positions()[c] for c in env.task.objects[:2])
+        pusher = env.pusher_position
+        assert np.linalg.norm(mover[:2] - anchor[:2]) > 0.10  # not yet close (Table 1: 10 cm)
+        assert np.linalg.norm(pusher[:2] - mover[:2]) >= pushing.PUCK_HALF + 0.02 - 1e-6  # not inside the puck
+        assert np.sign(pusher[0] - mover[0]) == np.sign(mover[0] - anchor[0])  # behind it, away from the anchor

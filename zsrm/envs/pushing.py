@@ -15,6 +15,12 @@ MAX_MOVE = 0.025  # metres of pusher motion per step at |action| = 1
 X_RANGE = (-0.22, 0.22)
 Y_RANGE = (-0.14, 0.14)
 PUSHER_Z = TABLE_TOP + 0.03
+# close to / inside of / on top of / below / in between: each puck starts this many puck widths
+# from the table's centre line. At 1.3 a uniform random policy brought the pucks close in 15% of
+# the steps (the oracle's 23-48 was under 3x that); at 1.7, in 7% (3 seeds x 30 episodes).
+GAP_START = 1.7
+# A puck's centre stays this far inside X_RANGE, so the pusher fits behind it (2-3 half-widths).
+PUCK_X_MAX = X_RANGE[1] - 2 * PUCK_HALF
 
 
 class PushingEnv(MujocoPixelEnv):
@@ -49,7 +55,7 @@ class PushingEnv(MujocoPixelEnv):
         rel = self.task.relation
         side = rng.choice([-1.0, 1.0])
         if rel in ("close_to", "inside_of", "on_top_of", "below", "in_between"):
-            xs, ys = [side * 1.3 * w, -side * 1.3 * w, 0.0], [0.5 * w, 0.5 * w, 0.5 * w]
+            xs, ys = [side * GAP_START * w, -side * GAP_START * w, 0.0], [0.5 * w, 0.5 * w, 0.5 * w]
         elif rel == "left_of":
             xs, ys = [1.2 * w, -1.2 * w], [0.5 * w, 0.5 * w]
         elif rel == "right_of":
@@ -61,7 +67,7 @@ class PushingEnv(MujocoPixelEnv):
         layout = {}
         for colour, x, y in zip(self.task.objects, xs, ys):
             dx, dy = rng.uniform(-self.spread_width, self.spread_width, 2)
-            layout[colour] = np.array([x + dx, y + dy, TABLE_TOP + PUCK_HALF_HEIGHT])
+            layout[colour] = np.array([np.clip(x + dx, -PUCK_X_MAX, PUCK_X_MAX), y + dy, TABLE_TOP + PUCK_HALF_HEIGHT])
         return layout
 
     def _reset_agent(self):
