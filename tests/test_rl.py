@@ -121,3 +121,15 @@ def test_device_is_checked_and_kept_out_of_the_run_config(tmp_path):
     cfg = TrainConfig(goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128, **TINY)
     summary = train(cfg, tmp_path / "run", progress=False, device="auto")
     assert "device" not in summary["config"]  # a run started on a GPU resumes on a CPU
+
+
+def test_a_run_records_its_scenes_layout_so_an_older_layout_is_another_run():
+    from zsrm.envs import PushingEnv, TabletopEnv
+
+    assert PushingEnv.layout_version == 2 and TabletopEnv.layout_version == 1
+    push, stack = TrainConfig(goal="push_close"), TrainConfig(goal="stack")
+    assert push.to_dict()["layout_version"] == 2
+    assert "layout_version" not in stack.to_dict()  # version 1 is left out: older stack runs still match
+    old_push = {k: v for k, v in push.to_dict().items() if k != "layout_version"}  # as written before
+    assert old_push != push.to_dict() and old_push != push.identity()
+    assert TrainConfig.from_dict(old_push).layout_version == 2  # read back as the current layout

@@ -21,4 +21,12 @@ for _id, _entry in (
     if _id not in registry:
         register(id=_id, entry_point=_entry, max_episode_steps=EPISODE_STEPS if _id != PENDULUM_ID else 1000)
 
-__all__ = ["DoublePendulumPixelEnv", "PushingEnv", "TabletopEnv", "EPISODE_STEPS"]
+SCENES = {TABLETOP_ID: TabletopEnv, PUSHING_ID: PushingEnv, PENDULUM_ID: DoublePendulumPixelEnv}
+
+
+def layout_version(env_id: str) -> int:
+    """How a scene's task episodes start, as a version (its class's ``layout_version``)."""
+    return getattr(SCENES[env_id], "layout_version", 1)
+
+
+__all__ = ["DoublePendulumPixelEnv", "PushingEnv", "TabletopEnv", "EPISODE_STEPS", "SCENES", "layout_version"]

@@ -72,6 +72,9 @@ class MujocoPixelEnv(gym.Env):
     rest_height: float  # height of an object's centre above the table when it rests on it
     containers: tuple[str, ...] = ()  # objects named by noun, not colour (bodies named as they are)
     frame_skip = 8  # 8 x 5 ms = one 0.04 s control step
+    # Raised whenever task scenes start differently: a run's config records it, so that a
+    # result of the old layout is never taken for a finished run of the new one.
+    layout_version = 1
 
     def __init__(self, task, cameras=("front",), image_size: int = 64, spread: str = "seen",
                  render_mode: str | None = None, objects=None, action_repeat: int = 1):

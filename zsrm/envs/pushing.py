@@ -40,6 +40,7 @@ class PushingEnv(MujocoPixelEnv):
     object_half_size = PUCK_HALF
 
     rest_height = PUCK_HALF_HEIGHT
+    layout_version = 2  # 2: pucks start GAP_START = 1.7 widths out (1: 1.3)
 
     def __init__(self, task="push_close", cameras=("front",), image_size=64, spread="seen", render_mode=None,
                  objects=None, action_repeat: int = 1):

@@ -5,7 +5,7 @@ Two presets: ``cpu`` fits the 300k-step budget of a 2-core machine; ``paper`` is
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Literal
 
 REWARDS = ("oracle", "zsrm", "base", "vice", "curiosity", "random")
@@ -75,10 +75,12 @@ class TrainConfig:
     """tabletop tasks: the gripper starts open above the block the goal moves (above), or with its
     open fingers around it, so that closing them grasps it (around); auto: around for stacking
     goals (on top of, below), whose oracle reward stayed 0 for 300k steps from above, else above"""
+    layout_version: int = field(default=0, metadata={"cli": False})
+    """how the goal's scene starts its episodes (0: the scene's current version); recorded, not chosen"""
 
     # Settings added after runs were committed: written only when changed, so that a finished
     # run made before they existed still matches its configuration.
-    ADDED = {"start": "above"}
+    ADDED = {"start": "above", "layout_version": 1}
 
     def __post_init__(self):
         if self.reward not in REWARDS:
@@ -97,6 +99,10 @@ class TrainConfig:
         if relation is None and self.reward in ("zsrm", "vice"):
             raise ValueError(f"the {self.reward} reward reads a spatial relation; the pendulum trains with "
                              "base, oracle, curiosity or random")
+        if self.layout_version == 0:  # a run of an older layout is another run
+            from zsrm.envs import layout_version
+
+            self.layout_version = layout_version(task_entry_id(self.goal))
         if self.reward == "zsrm":  # record which shipped student: a retrained one is another run
             import zsrm.fullmodel  # noqa: F401  (registers the shipped student)
             from zsrm.vlm.factory import pinned
@@ -131,6 +137,13 @@ class TrainConfig:
 
 # Relations whose tasks start with the moved block in the open fingers (start "auto").
 STACKING = ("on_top_of", "below")
+
+
+def task_entry_id(goal: str) -> str:
+    """The gymnasium id of a goal's scene."""
+    from zsrm.tasks.catalogue import resolve
+
+    return resolve(goal).env_id
 
 
 def goal_relation(goal: str) -> str | None:
