@@ -56,17 +56,18 @@ class _SceneRenderer:
         self.option = mujoco.MjvOption()
         self.option.geomgroup[3] = 0  # the env's hidden (unused) objects
         self.geoms = {}
-        for c in COLOURS:
-            body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"{cls.shape}_{c}")
+        for c in COLOURS + cls.containers:  # containers (the tabletop's box) are bodies named as they are
+            name = c if c in cls.containers else f"{cls.shape}_{c}"
+            body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
             self.geoms[c] = np.arange(m.body_geomadr[body], m.body_geomadr[body] + m.body_geomnum[body])
         self.geom_type = int(mujoco.mjtObj.mjOBJ_GEOM)
 
-    def visible_pixels(self, camera: str) -> np.ndarray:
-        """Pixels of each colour's object in a camera, in COLOURS order."""
+    def visible_pixels(self, camera: str, objects: tuple[str, ...] = COLOURS) -> np.ndarray:
+        """Pixels of each object in a camera, in the order of ``objects`` (default: the colours')."""
         self.seg.update_scene(self.env.data, camera=camera, scene_option=self.option)
         seg = self.seg.render()
         ids = np.where(seg[..., 1] == self.geom_type, seg[..., 0], -1)
-        return np.array([np.isin(ids, self.geoms[c]).sum() for c in COLOURS])
+        return np.array([np.isin(ids, self.geoms[c]).sum() for c in objects])
 
     def close(self):
         self.seg.close()

@@ -26,7 +26,8 @@ from zsrm.vlm.pretrain import PretrainConfig, check_config
 
 def pretrain_scene_vlm(cfg: PretrainConfig, fresh: bool = False, progress: bool = True):
     """The renders (a data stage, cached in WORKDIR/renders; the pendulum's in
-    WORKDIR/pendulum-renders when ``cfg.pendulum_scenes``), then the scene VLM trained on them."""
+    WORKDIR/pendulum-renders when ``cfg.pendulum_scenes``, the box's in WORKDIR/box-renders when
+    ``cfg.box_scenes``), then the scene VLM trained on them."""
     from zsrm.data.renders import load_renders
     from zsrm.vlm.pretrain import check_config, pretrain
 
@@ -41,7 +42,13 @@ def pretrain_scene_vlm(cfg: PretrainConfig, fresh: bool = False, progress: bool 
 
         pendulum = load_pendulum_renders(Path(cfg.workdir) / "pendulum-renders", cfg.pendulum_scenes,
                                          cfg.shard_size, cfg.seed, cfg.image_size, progress)
-    return pretrain(cfg, renders, progress, pendulum=pendulum)
+    box = None
+    if cfg.box_scenes:
+        from zsrm.data.box_renders import load_box_renders
+
+        box = load_box_renders(Path(cfg.workdir) / "box-renders", cfg.box_scenes, cfg.shard_size, cfg.seed,
+                               cfg.image_size, progress)
+    return pretrain(cfg, renders, progress, pendulum=pendulum, box=box)
 
 
 @dataclass(kw_only=True)

@@ -9,6 +9,10 @@ Captions say *what* is visible, never *where*: a random non-empty subset of the 
 objects in random order ("a blue block and a red block"). A caption never lists everything
 that is absent, so "a red block" means "there is a red block", not "only a red block" (a
 prototype whose captions named exactly the visible set learnt the latter and lost presence).
+
+The tabletop's open box has no colour: renders that show it (:mod:`zsrm.data.box_renders`) may
+name it too, as "a box" (``presence_caption(..., box=True)``); captions of renders without the
+box are unchanged, draw for draw.
 """
 from __future__ import annotations
 
@@ -19,8 +23,10 @@ import torch
 
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
+from zsrm.tasks.lexicon import CONTAINERS
 
 MIN_VISIBLE_PIXELS = 5  # at 64 px; scaled with image area for other sizes
+BOX_PHRASE = f"a {CONTAINERS[0]}"  # the box has no colour: its noun alone names it, as in goals
 
 
 def min_visible_pixels(image_size: int) -> int:
@@ -41,18 +47,24 @@ def probe_text(colour: str, shape: str) -> str:
     return f"a {colour} {shape}"
 
 
-def presence_caption(colours: Iterable[str], shape: str, rng: np.random.Generator) -> str:
-    """A caption naming a random non-empty subset of ``colours`` (the visible objects), in random order.
+def presence_caption(colours: Iterable[str], shape: str, rng: np.random.Generator, box: bool = False) -> str:
+    """A caption naming a random non-empty subset of ``colours`` (the visible objects), in random
+    order; with ``box`` (the tabletop's box is visible too), the box is one of the objects to pick from.
 
     >>> presence_caption(["red", "blue"], "block", np.random.default_rng(2))
     'a blue block and a red block'
+    >>> presence_caption([], "block", np.random.default_rng(2), box=True)
+    'a box'
     """
-    colours = list(colours)
-    if not colours:
+    if box and shape != SCENE_SHAPES["tabletop"]:
+        raise ValueError(f"the box stands on the tabletop, with blocks, not with {shape}s")
+    # The box goes last, so that without it the draws (and captions) are those of before.
+    phrases = [probe_text(c, shape) for c in colours] + ([BOX_PHRASE] if box else [])
+    if not phrases:
         raise ValueError("a presence caption needs at least one visible object")
-    k = int(rng.integers(1, len(colours) + 1))
-    chosen = rng.permutation(len(colours))[:k]
-    return join_phrases([probe_text(colours[i], shape) for i in chosen])
+    k = int(rng.integers(1, len(phrases) + 1))
+    chosen = rng.permutation(len(phrases))[:k]
+    return join_phrases([phrases[i] for i in chosen])
 
 
 def all_presence_captions(shape: str) -> list[str]:
@@ -61,6 +73,22 @@ def all_presence_captions(shape: str) -> list[str]:
 
     return [join_phrases([probe_text(c, shape) for c in perm])
             for k in range(1, len(COLOURS) + 1) for perm in permutations(COLOURS, k)]
+
+
+def all_box_captions() -> list[str]:
+    """Every caption :func:`presence_caption` can write with ``box=True`` that names the box
+    (ordered subsets of the four blocks and the box that hold the box); the others are
+    :func:`all_presence_captions` of blocks."""
+    from itertools import permutations
+
+    phrases = [probe_text(c, SCENE_SHAPES["tabletop"]) for c in COLOURS] + [BOX_PHRASE]
+    return [join_phrases(list(perm)) for k in range(1, len(phrases) + 1)
+            for perm in permutations(phrases, k) if BOX_PHRASE in perm]
+
+
+def box_visible(pixels: int, image_size: int = 64) -> bool:
+    """Does the box show enough pixels to be named (the colours' threshold)?"""
+    return int(pixels) >= min_visible_pixels(image_size)
 
 
 def visible_colours(visible_row: np.ndarray, image_size: int = 64) -> list[str]:

@@ -15,6 +15,16 @@ web captions and the pendulum's base reward (Figure 4) needs. Such a VLM is anot
 goes to a folder named with ``out``, never over the shipped one. With N = 0 nothing changes
 (the same batches, the same identity as the shipped VLM's).
 
+With ``box_scenes`` N > 0, renders of N tabletop scenes with the open box
+(:mod:`zsrm.data.box_renders`, cached in ``WORKDIR/box-renders``; a third of them start with a
+block in the box) join the batches, captioned with the visible blocks and, where it shows, "a
+box". The presence renders have no box, so the shipped VLM never learnt the word and its
+Grad-CAM cannot find the box that "inside of" is read against. ``init`` starts from a saved
+scene VLM (e.g. the shipped one) instead of random weights, and ``freeze_trunk`` keeps that
+VLM's image trunk, up to and including the Grad-CAM layer, bit-identical (no gradient, no
+weight decay): RL policies read the trunk's feature map, so they see the same features while
+the head and the text projection learn the box. These too are other models, for another ``out``.
+
 Resumable: the model, optimizer and step are checkpointed in ``WORKDIR/checkpoint/``;
 running the same command again continues where a killed run stopped. Every step's batch, captions and flips come from
 ``np.random.default_rng([seed, step])``, so a resumed run matches an uninterrupted one.
@@ -37,8 +47,9 @@ from zsrm.tasks.pendulum import POSES, all_pendulum_captions, mirrored, pendulum
 from zsrm.vlm.files import atomic_path
 from zsrm.vlm.losses import multi_positive_contrastive_loss
 from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
-from zsrm.vlm.presence import all_presence_captions, presence_caption, visible_colours
-from zsrm.vlm.scene import SHIPPED_SCENE_DIR, SceneVLM, create_scene_vlm
+from zsrm.vlm.presence import all_box_captions, all_presence_captions, box_visible, presence_caption, visible_colours
+from zsrm.vlm.registry import read_config
+from zsrm.vlm.scene import SCENE_PRESETS, SHIPPED_SCENE_DIR, SceneConfig, SceneFolder, SceneVLM, create_scene_vlm
 
 SHAPES = list(SCENE_SHAPES.values())  # a render's "shape" index -> the shape its captions name
 
@@ -67,13 +78,16 @@ class PretrainConfig:
     checkpoint_every: int = 250  # steps between checkpoints
     threads: int = 0  # torch threads (0: torch's default)
     pendulum_scenes: int = 0  # pendulum renders with pose captions (upright, leaning, fallen) to mix in; needs --out
+    box_scenes: int = 0  # tabletop scenes with the open box (captioned "a box" where it shows) to mix in; needs --out
+    init: str = ""  # start from this scene VLM folder (e.g. zsrm/vlm/weights/scene), not random weights; needs --out
+    freeze_trunk: bool = False  # --init's image trunk (to the Grad-CAM layer) stays bit-identical; the rest learns
 
     # Settings that define the run: a checkpoint made with others cannot be resumed.
     IDENTITY = ("arch", "scenes", "shard_size", "image_size", "steps", "batch_size", "lr", "weight_decay",
                 "warmup_steps", "seed")
     # Settings added after the shipped VLM was trained: part of the identity only when changed,
     # so that its checkpoints and config still match.
-    ADDED = {"pendulum_scenes": 0}
+    ADDED = {"pendulum_scenes": 0, "box_scenes": 0, "init": "", "freeze_trunk": False}
 
     def identity(self) -> dict:
         d = {k: getattr(self, k) for k in self.IDENTITY}
@@ -82,16 +96,57 @@ class PretrainConfig:
 
 
 def check_config(cfg: PretrainConfig) -> None:
-    """Refuse what cannot be a run: a negative pendulum count, or a pendulum VLM written over the shipped one."""
-    if cfg.pendulum_scenes < 0:
-        raise ValueError(f"--pendulum-scenes must be >= 0, got {cfg.pendulum_scenes}")
-    if cfg.pendulum_scenes and Path(cfg.out).resolve() == SHIPPED_SCENE_DIR.resolve():
-        raise ValueError("--pendulum-scenes trains another VLM than the shipped one: name its folder with --out "
-                         "(e.g. --out runs/vlm-pendulum)")
+    """Refuse what cannot be a run: a negative render count, another VLM than the shipped one
+    written over it, a frozen trunk with no --init, an --init that is not a scene VLM of
+    ``arch`` at ``image_size``."""
+    for name in ("pendulum_scenes", "box_scenes"):
+        if getattr(cfg, name) < 0:
+            raise ValueError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(cfg, name)}")
+    if cfg.freeze_trunk and not cfg.init:
+        raise ValueError("--freeze-trunk keeps the trunk of the VLM named by --init "
+                         "(e.g. --init zsrm/vlm/weights/scene); a frozen random trunk would learn nothing")
+    # Each setting that makes another VLM than the shipped one, and an --out to suggest for it.
+    other_vlm = {"--pendulum-scenes": (cfg.pendulum_scenes, "runs/vlm-pendulum"),
+                 "--box-scenes": (cfg.box_scenes, "runs/vlm-box"), "--init": (cfg.init, "runs/vlm-box"),
+                 "--freeze-trunk": (cfg.freeze_trunk, "runs/vlm-box")}
+    for flag, (value, example) in other_vlm.items():
+        if value and Path(cfg.out).resolve() == SHIPPED_SCENE_DIR.resolve():
+            raise ValueError(f"{flag} trains another VLM than the shipped one: name its folder with --out "
+                             f"(e.g. --out {example})")
+    if cfg.init:
+        _check_init(cfg)
+
+
+def _check_init(cfg: PretrainConfig) -> None:
+    """--init names a saved scene VLM made with ``arch`` and ``image_size`` (its config.json only)."""
+    try:
+        have = read_config(cfg.init, kind=SceneVLM.backend, schema=SceneFolder).config
+    except (FileNotFoundError, ValueError) as err:
+        raise ValueError(f"--init: {err}") from None
+    want = SceneConfig(**{**SCENE_PRESETS[cfg.arch], "image_size": cfg.image_size})
+    diff = [f"{k}: {getattr(have, k)} there, {getattr(want, k)} here" for k in SceneConfig.__dataclass_fields__
+            if getattr(have, k) != getattr(want, k)]
+    if diff:
+        raise ValueError(f"--init {cfg.init} is a scene VLM of another architecture than --arch {cfg.arch} "
+                         f"--image-size {cfg.image_size} ({'; '.join(diff)})")
 
 
 # --- training ----------------------------------------------------------------------------------
+def _initial_model(cfg: PretrainConfig) -> SceneVLM:
+    """The model a new run starts from: the scene VLM ``init``, or random weights of ``arch``."""
+    if cfg.init:
+        model = SceneVLM.from_folder(cfg.init)
+        model.meta = {}  # the run's provenance replaces the init's
+        return model
+    return create_scene_vlm(cfg.arch, seed=cfg.seed, image_size=cfg.image_size)
+
+
 def _optimizer(model: SceneVLM, cfg: PretrainConfig) -> torch.optim.Optimizer:
+    """AdamW over what the run trains; with ``freeze_trunk`` the image trunk is left out (no
+    gradient, no weight decay), so it stays bit-identical."""
+    if cfg.freeze_trunk:
+        for p in model.visual.trunk_parameters():
+            p.requires_grad_(False)
     return adamw(model, cfg.lr, cfg.weight_decay)
 
 
@@ -100,14 +155,17 @@ def learning_rate(step: int, cfg: PretrainConfig) -> float:
     return warmup_cosine(step, cfg.lr, cfg.warmup_steps, cfg.steps)
 
 
-def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfig, pendulum: dict | None = None):
+def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfig, pendulum: dict | None = None,
+               box: dict | None = None):
     """Images (uint8 NHWC) and captions of one step, a pure function of (seed, step).
 
-    ``pendulum``: pendulum renders (:func:`zsrm.data.pendulum_renders.render_pendulum_scenes`)
-    drawn into the batch with ``data``'s rows, uniformly over both."""
+    ``pendulum``: pendulum renders (:func:`zsrm.data.pendulum_renders.render_pendulum_scenes`);
+    ``box``: box renders (:func:`zsrm.data.box_renders.render_box_scenes`), every row with
+    something to name. Either or both are drawn into the batch with ``data``'s rows, uniformly
+    over all rows."""
     rng = np.random.default_rng([cfg.seed, 1, step])
-    if pendulum is not None:
-        return _mixed_batch(data, train_rows, pendulum, rng, cfg)
+    if pendulum is not None or box is not None:
+        return _mixed_batch(data, train_rows, rng, cfg, pendulum, box)
     rows = train_rows[rng.choice(len(train_rows), min(cfg.batch_size, len(train_rows)), replace=False)]
     captions = [presence_caption(visible_colours(data["visible"][r], cfg.image_size), SHAPES[data["shape"][r]], rng)
                 for r in rows]
@@ -118,11 +176,14 @@ def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfi
     return np.ascontiguousarray(images), captions
 
 
-def _mixed_batch(data: dict, train_rows: np.ndarray, pendulum: dict, rng: np.random.Generator,
-                 cfg: PretrainConfig):
-    """A batch drawn from the presence rows and the pendulum renders together; half the images
+def _mixed_batch(data: dict, train_rows: np.ndarray, rng: np.random.Generator, cfg: PretrainConfig,
+                 pendulum: dict | None = None, box: dict | None = None):
+    """A batch drawn from the presence rows, the pendulum renders and the box renders together
+    (numbered in that order, so a run without box renders draws as before); half the images
     mirrored, a mirrored pendulum's lean captioned as the other side."""
-    total = len(train_rows) + len(pendulum["images"])
+    n_pendulum = 0 if pendulum is None else len(pendulum["images"])
+    n_box = 0 if box is None else len(box["images"])
+    total = len(train_rows) + n_pendulum + n_box
     picks = rng.choice(total, min(cfg.batch_size, total), replace=False)
     flips = rng.random(len(picks)) < 0.5
     images, captions = [], []
@@ -132,10 +193,16 @@ def _mixed_batch(data: dict, train_rows: np.ndarray, pendulum: dict, rng: np.ran
             image = data["images"][r]
             captions.append(presence_caption(visible_colours(data["visible"][r], cfg.image_size),
                                              SHAPES[data["shape"][r]], rng))
-        else:
+        elif k < len(train_rows) + n_pendulum:
             j = k - len(train_rows)
             image, pose = pendulum["images"][j], POSES[pendulum["pose"][j]]
             captions.append(pendulum_caption(mirrored(pose) if flip else pose, rng))
+        else:  # captions never say where, so a mirrored box scene keeps its caption
+            j = k - len(train_rows) - n_pendulum
+            image = box["images"][j]
+            captions.append(presence_caption(visible_colours(box["visible"][j], cfg.image_size),
+                                             SCENE_SHAPES["tabletop"], rng,
+                                             box=box_visible(box["box_visible"][j], cfg.image_size)))
         images.append(image[:, ::-1] if flip else image)
     return np.ascontiguousarray(np.stack(images)), captions
 
@@ -160,8 +227,10 @@ def _load_checkpoint(folder: Path, cfg: PretrainConfig):
     return model, opt, state["step"], state["log"]
 
 
-def _provenance(cfg: PretrainConfig, train_images: int, log: list[dict], pendulum: dict | None) -> dict:
-    """What the saved model's config.json says about its training (the pendulum's part only if any)."""
+def _provenance(cfg: PretrainConfig, train_images: int, log: list[dict], pendulum: dict | None,
+                box: dict | None = None) -> dict:
+    """What the saved model's config.json says about its training (the pendulum's, the box's,
+    ``init`` and ``freeze_trunk`` only if used)."""
     meta = {
         "trained_by": "zsrm pretrain-vlm",
         "config": cfg.identity(),
@@ -173,33 +242,48 @@ def _provenance(cfg: PretrainConfig, train_images: int, log: list[dict], pendulu
     }
     if pendulum is not None:
         meta.update({"pendulum_images": int(len(pendulum["images"])), "pendulum_poses": list(POSES)})
+    if box is not None:
+        meta["box_images"] = int(len(box["images"]))
+    if cfg.init:
+        meta["init"] = cfg.init
+    if cfg.freeze_trunk:
+        meta["freeze_trunk"] = True
     return meta
 
 
-def _check_pendulum(cfg: PretrainConfig, data: dict, pendulum: dict | None) -> dict | None:
-    """The pendulum renders a run of ``cfg`` trains on (its first ``pendulum_scenes``), checked."""
+def _check_renders(cfg: PretrainConfig, data: dict, pendulum: dict | None,
+                   box: dict | None) -> tuple[dict | None, dict | None]:
+    """The pendulum and box renders a run of ``cfg`` trains on (the first ``pendulum_scenes``
+    and ``box_scenes`` scenes; of the box's, the images with something to name), checked."""
     check_config(cfg)
-    if bool(cfg.pendulum_scenes) != (pendulum is not None):
-        raise ValueError(f"pendulum_scenes is {cfg.pendulum_scenes} but pendulum renders were "
-                         f"{'not ' if pendulum is None else ''}given")
-    if pendulum is None:
-        return None
-    pendulum = {k: v[:cfg.pendulum_scenes] for k, v in pendulum.items()}
-    if pendulum["images"].shape[1:3] != data["images"].shape[1:3]:
-        raise ValueError(f"pendulum renders are {pendulum['images'].shape[1]} px, the scenes "
-                         f"{data['images'].shape[1]} px")
-    return pendulum
+    for name, scenes, renders in (("pendulum", cfg.pendulum_scenes, pendulum), ("box", cfg.box_scenes, box)):
+        if bool(scenes) != (renders is not None):
+            raise ValueError(f"{name}_scenes is {scenes} but {name} renders were "
+                             f"{'not ' if renders is None else ''}given")
+        if renders is not None and renders["images"].shape[1:3] != data["images"].shape[1:3]:
+            raise ValueError(f"{name} renders are {renders['images'].shape[1]} px, the scenes "
+                             f"{data['images'].shape[1]} px")
+    if pendulum is not None:
+        pendulum = {k: v[:cfg.pendulum_scenes] for k, v in pendulum.items()}
+    if box is not None:
+        named = [bool(visible_colours(v, cfg.image_size)) or box_visible(b, cfg.image_size)
+                 for v, b in zip(box["visible"], box["box_visible"])]
+        keep = (box["scene_index"] < cfg.box_scenes) & np.array(named, bool)
+        box = {k: v[keep] for k, v in box.items()}
+    return pendulum, box
 
 
-def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True, pendulum: dict | None = None) -> SceneVLM:
+def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True, pendulum: dict | None = None,
+             box: dict | None = None) -> SceneVLM:
     """Train (or resume training) a scene VLM on renders ``data`` (see
     :func:`zsrm.data.renders.render_presence_scenes`) and save it to ``cfg.out``; with
     ``cfg.pendulum_scenes``, also on the pendulum renders ``pendulum`` (see
-    :func:`zsrm.data.pendulum_renders.render_pendulum_scenes`)."""
+    :func:`zsrm.data.pendulum_renders.render_pendulum_scenes`); with ``cfg.box_scenes``, also
+    on the box renders ``box`` (see :func:`zsrm.data.box_renders.render_box_scenes`)."""
     from tqdm import tqdm
 
-    pendulum = _check_pendulum(cfg, data, pendulum)
-    extra = {} if pendulum is None else {"pendulum": pendulum}
+    pendulum, box = _check_renders(cfg, data, pendulum, box)
+    extra = {name: renders for name, renders in (("pendulum", pendulum), ("box", box)) if renders is not None}
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     work = Path(cfg.workdir)
@@ -212,12 +296,13 @@ def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True, pendulum: d
         model, opt, start, log = _load_checkpoint(ckpt, cfg)
         print(f"resuming from {ckpt} at step {start}/{cfg.steps}")
     else:
-        model = create_scene_vlm(cfg.arch, seed=cfg.seed, image_size=cfg.image_size)
+        model = _initial_model(cfg)
         opt, start, log = _optimizer(model, cfg), 0, []
     model.train()
     # Encode every possible caption once: the frozen sentence encoder then never runs again.
     model.sentence_features([c for s in SHAPES for c in all_presence_captions(s)]
-                            + (all_pendulum_captions() if pendulum is not None else []))
+                            + (all_pendulum_captions() if pendulum is not None else [])
+                            + (all_box_captions() if box is not None else []))
 
     t0, elapsed_before = time.time(), (log[-1]["seconds"] if log else 0.0)
     bar = tqdm(total=cfg.steps, initial=start, desc="pretrain scene VLM", unit="step", disable=not progress)
@@ -239,7 +324,7 @@ def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True, pendulum: d
     bar.close()
 
     model.eval()
-    model.meta = _provenance(cfg, len(train_rows), log, pendulum)
+    model.meta = _provenance(cfg, len(train_rows), log, pendulum, box)
     model.save(cfg.out)
     with atomic_path(work / "log.csv") as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=["step", "loss", "seconds"])

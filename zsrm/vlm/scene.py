@@ -170,6 +170,10 @@ class SceneImageTower(nn.Module):
     def trunk(self, x: torch.Tensor) -> torch.Tensor:
         return self.final(self.layer2(self.down(self.layer1(self.stem(x)))))
 
+    def trunk_parameters(self) -> list[nn.Parameter]:
+        """The parameters :meth:`trunk` uses (up to and including the Grad-CAM layer)."""
+        return [p for m in (self.stem, self.layer1, self.down, self.layer2, self.final) for p in m.parameters()]
+
     def head(self, features: torch.Tensor) -> torch.Tensor:
         # Mean pooling sees how much of a colour there is, max pooling that it is there at all
         # (a block is a handful of cells); both keep gradients to every cell for Grad-CAM.
