@@ -4,6 +4,11 @@ every camera, seeded, written in shards with a manifest and resumable after a ki
 Each image comes with what only evaluation may read: the objects' true world positions and
 their true pixel coordinates on each camera.
 
+With ``p_box`` some tabletop scenes also hold the open box ("inside of" needs it), in about
+half of them with a block dropped into it at the reset. The box is stored apart from the
+colours (``box_present``, ``box_position``, ``box_pixels_<camera>``, only in datasets collected
+with ``p_box``), so the colour arrays keep their shape and meaning in every dataset.
+
 >>> import tempfile
 >>> folder = tempfile.mkdtemp()
 >>> data = collect(CollectConfig(images=4, shard_size=2, episode_steps=4, record_every=2), folder, progress=False)
@@ -20,8 +25,13 @@ from zsrm.data.dataset import ExplorationData
 from zsrm.data.shards import ShardFolder, save_npz
 from zsrm.tasks.catalogue import SCENE_IDS
 from zsrm.tasks.language import COLOURS
+from zsrm.tasks.lexicon import CONTAINERS
 from zsrm.tasks.relations import CAMERAS
 
+BOX = CONTAINERS[0]
+# Box scenes whose reset drops a block into the box: random actions almost never do, and a box
+# that never holds a block teaches no "inside of".
+P_BLOCK_IN_BOX = 0.5
 
 
 @dataclass
@@ -42,6 +52,7 @@ class CollectConfig:
     p_stack: float = 0.25  # chance that a block starts stacked on another
     p_side: float = 0.25  # chance that an object starts beside another (near or touching)
     p_hold: float = 0.0  # tabletop: chance that the gripper starts holding a block above another
+    p_box: float = 0.0  # tabletop: chance that a scene also holds the open box (half of those with a block in it)
     colours: tuple[str, ...] = field(init=False)
 
     def __post_init__(self):
@@ -49,7 +60,7 @@ class CollectConfig:
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        for name in ("p_stack", "p_side", "p_hold"):
+        for name in ("p_stack", "p_side", "p_hold", "p_box"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {getattr(self, name)!r}")
         self.scenes, self.cameras, self.exclude = tuple(self.scenes), tuple(self.cameras), tuple(self.exclude)
@@ -76,8 +87,9 @@ class CollectConfig:
     def to_json(self) -> dict:
         d = asdict(self)
         d.pop("colours")
-        if not d["p_hold"]:  # added later: datasets collected before it keep matching their manifest
-            d.pop("p_hold")
+        for name in ("p_hold", "p_box"):  # added later: datasets collected before them keep matching their manifest
+            if not d[name]:
+                d.pop(name)
         return d
 
 
@@ -140,6 +152,9 @@ def collect_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> 
     out.update({f"pixels_{c}": np.full((n, k, 2), np.nan, np.float32) for c in cfg.cameras})
     out.update(positions=np.full((n, k, 3), np.nan, np.float32), present=np.zeros((n, k), bool),
                scene=np.zeros(n, np.int8), episode=np.zeros(n, np.int32), step=np.zeros(n, np.int16))
+    if cfg.p_box:  # only datasets that can hold the box have its arrays
+        out.update(box_present=np.zeros(n, bool), box_position=np.full((n, 3), np.nan, np.float32))
+        out.update({f"box_pixels_{c}": np.full((n, 2), np.nan, np.float32) for c in cfg.cameras})
     row, episode = 0, 0
     try:
         while row < n:
@@ -147,16 +162,23 @@ def collect_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> 
             n_obj = int(rng.integers(cfg.min_objects, cfg.max_objects + 1))
             chosen = set(rng.choice(cfg.colours, n_obj, replace=False).tolist())
             colours = tuple(c for c in COLOURS if c in chosen)
-            env = envs.get(scene, colours)
+            # Drawn only when p_box is set: datasets without the box keep their random stream.
+            with_box = scene == "tabletop" and bool(cfg.p_box) and rng.random() < cfg.p_box
+            env = envs.get(scene, colours + (BOX,) if with_box else colours)
             options = {"p_stack": cfg.p_stack, "p_side": cfg.p_side}
             if scene == "tabletop" and cfg.p_hold:  # the only scene with a gripper that holds
                 options["p_hold"] = cfg.p_hold
+            if with_box:
+                options["p_inside"] = P_BLOCK_IN_BOX
             obs, info = env.reset(seed=int(rng.integers(2**31 - 1)), options=options)
             for step in range(cfg.episode_steps):
                 if step % cfg.record_every == 0 and row < n:
                     for cam in cfg.cameras:
                         out[f"images_{cam}"][row] = obs[cam]
                     for colour, xyz in info["object_positions"].items():
+                        if colour == BOX:
+                            _record_box(out, row, env, xyz, cfg)
+                            continue
                         i = COLOURS.index(colour)
                         out["positions"][row, i] = xyz
                         out["present"][row, i] = True
@@ -174,6 +196,25 @@ def collect_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> 
         if own:
             envs.close()
     return out
+
+
+def box_reference_point(xyz) -> np.ndarray:
+    """The box's point whose projection is its true pixel centre: its centre at the height of a
+    block's centre (a block in the box rests 4 mm above it), the height at which the tilted
+    camera's table calibration maps pixels back to table metres exactly."""
+    from zsrm.envs.base import TABLE_TOP
+    from zsrm.envs.tabletop import BLOCK_HALF
+
+    return np.array([xyz[0], xyz[1], TABLE_TOP + BLOCK_HALF])
+
+
+def _record_box(out: dict, row: int, env, xyz, cfg: CollectConfig) -> None:
+    from zsrm.envs.cameras import project
+
+    out["box_present"][row] = True
+    out["box_position"][row] = xyz
+    for cam in cfg.cameras:
+        out[f"box_pixels_{cam}"][row] = project(env, cam, box_reference_point(xyz), cfg.image_size)
 
 
 def collect(cfg: CollectConfig, folder, progress: bool = True) -> ExplorationData:

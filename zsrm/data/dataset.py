@@ -11,10 +11,23 @@ from pathlib import Path
 import numpy as np
 
 from zsrm.data.shards import MANIFEST, load_npz, read_manifest
+from zsrm.tasks.lexicon import CONTAINERS
 from zsrm.vlm.files import ZsrmFileError, read_json
 
 LABELS = "labels"  # the default labels folder inside a dataset folder
 ORACLE = "oracle"  # inside the labels folder: true-coordinate captions, for evaluation only
+BOX = CONTAINERS[0]
+
+
+def with_box(objects: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """Per-object arrays (N, 4, ...) of the colours with the box's (N, ...) as one more object
+    after them: (N, 5, ...). The box is stored apart so that the colour arrays of every dataset
+    keep their shape; the labeler and evaluation relate the five together.
+
+    >>> with_box(np.zeros((2, 4, 3)), np.ones((2, 3))).shape
+    (2, 5, 3)
+    """
+    return np.concatenate([objects, np.asarray(box, objects.dtype)[:, None]], axis=1)
 
 
 class ExplorationData:
@@ -38,6 +51,31 @@ class ExplorationData:
         self.table_homography: dict[str, dict[str, list]] = self.manifest.get("table_homography", {})
 
     @property
+    def has_box(self) -> bool:
+        """Collected with ``p_box``: some tabletop scenes hold the box, whose arrays are
+        ``box_present`` (N,), ``box_position`` (N, 3), ``box_pixels_<camera>`` (N, 2)."""
+        return bool(self.config.get("p_box"))
+
+    @property
+    def objects(self) -> tuple[str, ...]:
+        """What the labeler relates: the colours, then the box where the data can hold it."""
+        return self.colours + ((BOX,) if self.has_box else ())
+
+    @property
+    def box_keys(self) -> list[str]:
+        """The keys of the box's arrays (none where the data cannot hold the box)."""
+        return ["box_present", "box_position"] + [f"box_pixels_{c}" for c in self.cameras] if self.has_box else []
+
+    def object_arrays(self, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """``present``, ``positions`` and ``pixels_<camera>`` of loaded ``arrays`` over
+        :attr:`objects`: with the box as a fifth object where the data has it, as they are
+        otherwise (load :attr:`box_keys` with them). Keys that ``arrays`` lacks are left out."""
+        box_keys = {"present": "box_present", "positions": "box_position",
+                    **{f"pixels_{c}": f"box_pixels_{c}" for c in self.cameras}}
+        return {key: with_box(arrays[key], arrays[box]) if self.has_box else arrays[key]
+                for key, box in box_keys.items() if key in arrays}
+
+    @property
     def shards(self) -> list[str]:
         """Names of the finished shards, in order."""
         return sorted(self.manifest["shards"])
@@ -57,7 +95,8 @@ class ExplorationData:
         """The finished shards' arrays, concatenated. Keys: ``images_<camera>`` (N, H, W, 3)
         uint8; evaluation only: ``positions`` (N, 4, 3) world xyz and ``pixels_<camera>``
         (N, 4, 2) true pixel (x, row), NaN for absent colours; ``present`` (N, 4) over
-        :attr:`colours`; ``scene`` (N,) index into :attr:`scenes`; ``episode``, ``step``."""
+        :attr:`colours`; ``scene`` (N,) index into :attr:`scenes`; ``episode``, ``step``; where
+        :attr:`has_box`, the box's arrays apart (see :meth:`object_arrays`)."""
         parts = [self.shard(name, keys) for name in self.shards]
         if not parts:
             raise ValueError(f"{self.folder} holds no finished shard yet")

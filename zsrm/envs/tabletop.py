@@ -118,20 +118,24 @@ class TabletopEnv(MujocoPixelEnv):
             return d > BOX_HALF + BLOCK_HALF + 0.01 or above
         return all(ok(p) for c, p in layout.items() if c != "box")
 
-    def _random_layout(self, p_stack: float = 0.25, p_side: float = 0.0, p_hold: float = 0.0):
-        """Exploration: :meth:`MujocoPixelEnv._random_layout`, and with probability ``p_hold`` the
-        gripper starts holding a block in the air above another (up to 15 cm above stacked
-        height, mostly in line with it). Random actions almost never lift a block over another,
-        so without these frames a reward model never sees a block that hovers just too high to
-        be "on top of" one, and a policy learns to hover instead of stacking."""
+    def _random_layout(self, p_stack: float = 0.25, p_side: float = 0.0, p_hold: float = 0.0,
+                       p_inside: float = 0.0):
+        """Exploration: :meth:`MujocoPixelEnv._random_layout`; in a scene with the box, with
+        probability ``p_inside`` a block starts just above the box's opening and falls in (random
+        actions almost never drop one in, and "inside of" needs frames that show it); and with
+        probability ``p_hold`` the gripper starts holding a block in the air above another (up to
+        15 cm above stacked height, mostly in line with it). Random actions almost never lift a
+        block over another, so without these frames a reward model never sees a block that hovers
+        just too high to be "on top of" one, and a policy learns to hover instead of stacking."""
         layout = super()._random_layout(p_stack, p_side)
         self._hold_at_reset = None
         rng = self.np_random
+        # Drawn only in box scenes with p_inside set: other scenes keep their random stream.
+        if "box" in layout and p_inside and rng.random() < p_inside:
+            self._drop_into_box(layout)
         if not rng.random() < p_hold:
             return layout
-        # Blocks on the table with nothing stacked on them (a hovering block must not hit one).
-        free = [c for c, p in layout.items() if c not in self.containers and p[2] < TABLE_TOP + 1.5 * BLOCK_HALF
-                and not any(np.allclose(q[:2], p[:2], atol=BLOCK_HALF) and q[2] > p[2] for q in layout.values())]
+        free = self._free_blocks(layout)
         if len(free) < 2:
             return layout
         mover, base = rng.choice(free, 2, replace=False).tolist()
@@ -145,6 +149,24 @@ class TabletopEnv(MujocoPixelEnv):
         layout[mover] = p
         self._hold_at_reset = mover
         return layout
+
+    def _free_blocks(self, layout) -> list[str]:
+        """Blocks on the table with nothing stacked on them (they can move without hitting one)."""
+        return [c for c, p in layout.items() if c not in self.containers and p[2] < TABLE_TOP + 1.5 * BLOCK_HALF
+                and not any(np.allclose(q[:2], p[:2], atol=BLOCK_HALF) and q[2] > p[2] for q in layout.values())]
+
+    def _drop_into_box(self, layout) -> None:
+        """Move a free block to just above the box's opening (it falls in while the reset
+        settles); nothing moves when a block is over the opening already (stacked on the box)."""
+        box, slack = layout["box"], BOX_INNER_HALF - BLOCK_HALF - 0.002  # _layout_ok's "above the opening"
+        free = self._free_blocks(layout)
+        over = [c for c, p in layout.items()
+                if c != "box" and np.max(np.abs(p[:2] - box[:2])) < BOX_INNER_HALF - BLOCK_HALF]
+        if not free or over:
+            return
+        colour = free[self.np_random.integers(len(free))]
+        dx, dy = self.np_random.uniform(-slack, slack, 2)
+        layout[colour] = np.array([box[0] + dx, box[1] + dy, TABLE_TOP + 2 * BOX_HALF_HEIGHT + BLOCK_HALF + 0.005])
 
     def _set_object(self, colour: str, xyz):
         if colour in CONTAINERS:  # fixed to the world: move the body, standing on the table

@@ -10,6 +10,9 @@
 * presence: how well the Grad-CAM target score tells a phrase for an object in the scene
   from one for an object that is not (AUROC);
 * Figure 3: an image and the heat maps of "red block" and "yellow block", per camera.
+
+In data collected with the box (``zsrm collect --p-box``) the box is a fifth object of the
+captions (a block "inside of" it) and its localisation is reported apart (``*_box``).
 """
 from __future__ import annotations
 
@@ -22,9 +25,9 @@ from zsrm.data.shards import load_npz, read_manifest
 from zsrm.envs.cameras import apply_homography
 from zsrm.evaluation.metrics import auroc
 from zsrm.evaluation.plots import pyplot, save_figure
-from zsrm.grounding.annotate import Grounder, LabelConfig, labelers
+from zsrm.grounding.annotate import Grounder, LabelConfig, gradcam_objects, labelers
 from zsrm.grounding.gradcam import grid_centres, locate
-from zsrm.grounding.labeler import RelationTable, object_tuples, pixel_thresholds, world_table
+from zsrm.grounding.labeler import RelationTable, pixel_thresholds, relation_tuples, world_table
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import RELATIONS
@@ -85,23 +88,21 @@ def prf(pred: RelationTable, truth: RelationTable) -> dict[str, dict]:
 
 
 def _tables(data, cfg, pixels: dict, present, scene_index, world: bool = False, positions=None):
-    """Relation tables over all images (scenes' labelers applied to their own rows)."""
-    holds = {r: np.zeros((len(present), len(_tuples(r))), bool) for r in RELATIONS}
+    """Relation tables over all images (scenes' labelers applied to their own rows), over the
+    data's objects (the colours, and the box where the data can hold it)."""
+    tuples = {r: relation_tuples(r, data.objects) for r in RELATIONS}
+    holds = {r: np.zeros((len(present), len(tuples[r])), bool) for r in RELATIONS}
     for s, (scene, labeler) in enumerate(labelers(data, cfg).items()):
         rows = np.nonzero(scene_index == s)[0]
         if not len(rows):
             continue
         if world:
-            table = world_table(positions[rows], present[rows], thresholds=cfg.world_thresholds())
+            table = world_table(positions[rows], present[rows], data.objects, cfg.world_thresholds())
         else:
             table = labeler.table({c: xy[rows] for c, xy in pixels.items()}, present[rows])
         for r in RELATIONS:
             holds[r][rows] = table.holds[r]
-    return RelationTable(COLOURS, {r: _tuples(r) for r in RELATIONS}, holds)
-
-
-def _tuples(relation: str) -> np.ndarray:
-    return object_tuples(RELATIONS[relation].arity, len(COLOURS))
+    return RelationTable(data.objects, tuples, holds)
 
 
 def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
@@ -109,14 +110,19 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
     data = ExplorationData(data_folder)
     manifest, lab = load_labels(data, labels)
     cfg = LabelConfig(**manifest["config"])
-    arr = data.load(["positions", "present", "scene"] + [f"pixels_{c}" for c in data.cameras])
-    present, scene_index = arr["present"], arr["scene"]
+    arr = data.load(["positions", "present", "scene"] + [f"pixels_{c}" for c in data.cameras] + data.box_keys)
+    scene_index = arr["scene"]
     scene0 = data.scenes[0]
     report = _localisation(data, lab, arr)
-    pixels = {c: lab[f"gradcam_xy_{c}"] for c in data.cameras}
-    truth_pixels = {c: arr[f"pixels_{c}"] for c in data.cameras}
+    if data.has_box:
+        report.update(_box_localisation(data, lab, arr))
+    # Captions relate the data's objects: the colours, and the box as a fifth where it can be.
+    objects = data.object_arrays(arr)
+    present = objects["present"]
+    pixels = gradcam_objects(data, lab)
+    truth_pixels = {c: objects[f"pixels_{c}"] for c in data.cameras}
     truth_table = _tables(data, cfg, truth_pixels, present, scene_index)
-    world = _tables(data, cfg, None, present, scene_index, world=True, positions=arr["positions"])
+    world = _tables(data, cfg, None, present, scene_index, world=True, positions=objects["positions"])
     pred = _tables(data, cfg, pixels, present, scene_index)
     vs_pixel, vs_world = prf(pred, truth_table), prf(pred, world)
     for key, of in (("f1", "f1"), ("precision", "precision"), ("recall", "recall"), ("support", "support")):
@@ -130,7 +136,8 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
     report["stacked_pairs"] = _stacked_pairs(pixels["front"], truth_pixels["front"], truth_table,
                                              labelers(data, cfg)[scene0].thresholds["front"])
     if data.table_homography.get(scene0):
-        report["close_pairs"] = _close_pairs(data, cfg, pixels["tilted"], truth_pixels["tilted"], present, scene_index)
+        report["close_pairs"] = _close_pairs(data, cfg, lab["gradcam_xy_tilted"], arr["pixels_tilted"], arr["present"],
+                                             scene_index)
     report["meta"]["shortfalls"] = _shortfalls(report, cfg, data.block_width_px[scene0],
                                                set(data.table_homography.get(scene0, {})))
     return report
@@ -164,6 +171,19 @@ def _localisation(data: ExplorationData, lab: dict, arr: dict) -> dict:
         score = lab[f"gradcam_score_{cam}"]
         allowed = np.isfinite(score)
         report["presence_auroc"][cam] = auroc(score[allowed], present[allowed])
+    return report
+
+
+def _box_localisation(data: ExplorationData, lab: dict, arr: dict) -> dict:
+    """Per camera, on the images whose scene holds the box: the median and 90th percentile
+    distance (pixels) from the Grad-CAM of "a box" to the box's true centre, and the number of images."""
+    present = arr["box_present"][:, None]
+    report: dict = {"median_px_error_box": {}, "p90_px_error_box": {}, "box_images": int(present.sum())}
+    for cam in data.cameras:
+        err = _errors(lab[f"gradcam_box_xy_{cam}"][:, None], arr[f"box_pixels_{cam}"][:, None].astype(np.float64),
+                      present)
+        s = _summary(err)
+        report["median_px_error_box"][cam], report["p90_px_error_box"][cam] = s["median"], s["p90"]
     return report
 
 

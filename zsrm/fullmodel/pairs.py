@@ -183,6 +183,8 @@ class CaptionedImages:
                 images[c].append(arrays[f"images_{c}"])
             # Episodes are numbered within a shard: make the group ids unique across shards.
             groups.append(s * 1_000_000 + arrays["episode"].astype(np.int64))
+            # Colours only, never the box: the labeler writes no "close to" with the box, so a
+            # "far from a box" complement would be said of blocks beside it or in it too.
             objects += [(SCENE_SHAPES[data.scenes[sc]], [c for c, p in zip(data.colours, row) if p])
                         for sc, row in zip(arrays["scene"], arrays["present"])]
         return cls({c: np.concatenate(v) for c, v in images.items()}, captions, np.concatenate(groups), objects)

@@ -3,7 +3,9 @@
 For every shard of a dataset folder, the labels folder (``DATA/labels`` by default) gets:
 
 * ``shard_XXXXX.npz``: per camera, the Grad-CAM heat maps, located pixel coordinates,
-  heat-map peaks and target scores of every colour's phrase;
+  heat-map peaks and target scores of every colour's phrase; in data collected with the box
+  (``zsrm collect --p-box``), the same of the box's phrase "a box" apart (``gradcam_box_*``),
+  on the images whose scene holds it;
 * ``shard_XXXXX.json``: ``{"captions": [[...], ...]}``, the Grad-CAM captions of each image:
   what the reward model trains on. Only images and the scene's object list were read;
 * ``oracle/shard_XXXXX.json``: the captions that the TRUE coordinates give, kept apart for
@@ -27,7 +29,7 @@ from typing import Literal
 
 import numpy as np
 
-from zsrm.data.dataset import LABELS, ORACLE, ExplorationData
+from zsrm.data.dataset import LABELS, ORACLE, ExplorationData, with_box
 from zsrm.data.shards import ShardFolder, save_json, save_npz
 from zsrm.grounding.gradcam import GradCAM
 from zsrm.grounding.labeler import SpatialLabeler, pixel_thresholds, world_table
@@ -35,6 +37,7 @@ from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import WORLD_THRESHOLDS, Thresholds
 from zsrm.vlm.factory import DEFAULT_VLM
+from zsrm.vlm.presence import BOX_PHRASE
 
 
 @dataclass
@@ -82,7 +85,15 @@ class Grounder:
         if cfg.locate == "fine":
             self.fine_centres = np.asarray(cam.calibrate(first, fine=True) if fine_centres is None else fine_centres,
                                            dtype=np.float64)
-        for g in self.gradcam.values():
+        # The box is named as the box-aware pretraining names it ("a box", whatever the colour
+        # phrases' template), its score contrasted with the colours' phrases; the colours' own
+        # Grad-CAM is untouched, so their coordinates are those of data without the box.
+        self.box_gradcam = None
+        if data.has_box:
+            self.box_gradcam = GradCAM(vlm, target=cfg.target, locate=cfg.locate, cell_centres=cfg.cell_centres,
+                                       contrast=[cfg.template.format(p) for p in phrases_for("tabletop", self.allowed)],
+                                       presence_threshold=None, batch_size=cfg.batch_size)
+        for g in list(self.gradcam.values()) + ([self.box_gradcam] if self.box_gradcam else []):
             g.set_centres(self.centres, (size, size))
             if self.fine_centres is not None:
                 g.set_centres(self.fine_centres, (size, size), fine=True)
@@ -90,7 +101,9 @@ class Grounder:
     def shard(self, arrays: dict) -> dict[str, np.ndarray]:
         """Per camera: ``gradcam_xy_<cam>`` (n, 4, 2), ``gradcam_score_<cam>``,
         ``gradcam_peak_<cam>`` (n, 4), ``gradcam_map_<cam>`` (n, 4, h, w) float16; NaN or
-        0 for colours the data never holds."""
+        0 for colours the data never holds. With the box (``arrays`` holding ``box_present``):
+        ``gradcam_box_xy_<cam>`` (n, 2), ``gradcam_box_score_<cam>``, ``gradcam_box_peak_<cam>``
+        (n,), ``gradcam_box_map_<cam>`` (n, h, w), NaN or 0 where the scene has no box."""
         n, k = len(arrays["scene"]), len(COLOURS)
         cols = [COLOURS.index(c) for c in self.allowed]
         out = {}
@@ -112,23 +125,40 @@ class Grounder:
                 maps[rows[:, None], cols] = res.maps
             out.update({f"gradcam_xy_{cam}": xy, f"gradcam_score_{cam}": score, f"gradcam_peak_{cam}": peak,
                         f"gradcam_map_{cam}": maps})
+            if self.box_gradcam is not None and "box_present" in arrays:
+                out.update(self._box(arrays[f"images_{cam}"], arrays["box_present"], maps.shape[-2:], cam))
         return out
+
+    def _box(self, images: np.ndarray, box_present: np.ndarray, grid, cam: str) -> dict[str, np.ndarray]:
+        """Grad-CAM of the box's phrase on the images whose scene holds the box."""
+        n = len(images)
+        xy, score = np.full((n, 2), np.nan, np.float32), np.full(n, np.nan, np.float32)
+        peak, maps = np.zeros(n, np.float32), np.zeros((n,) + tuple(grid), np.float16)
+        rows = np.nonzero(box_present)[0]
+        if len(rows):
+            res = self.box_gradcam(images[rows], [BOX_PHRASE])
+            xy[rows], score[rows], peak[rows], maps[rows] = res.xy[:, 0], res.score[:, 0], res.peak[:, 0], res.maps[:, 0]
+        return {f"gradcam_box_xy_{cam}": xy, f"gradcam_box_score_{cam}": score, f"gradcam_box_peak_{cam}": peak,
+                f"gradcam_box_map_{cam}": maps}
 
 
 def labelers(data: ExplorationData, cfg: LabelConfig) -> dict[str, SpatialLabeler]:
     """The labeler of each scene: its shape's words, its cameras' pixel thresholds, and the
-    tilted camera read on the table in metres when the data has its calibration."""
+    tilted camera read on the table in metres when the data has its calibration. It relates
+    the data's objects (:attr:`ExplorationData.objects`: the colours, and the box if the data
+    can hold it; only tabletop scenes ever hold it)."""
     out = {}
     for scene in data.scenes:
         table = data.table_homography.get(scene, {})
         thresholds = pixel_thresholds(data.block_width_px[scene], SCENE_SHAPES[scene], cfg.world_thresholds(), table)
-        out[scene] = SpatialLabeler(thresholds, shape=SCENE_SHAPES[scene], table_homography=table)
+        out[scene] = SpatialLabeler(thresholds, shape=SCENE_SHAPES[scene], colours=data.objects, table_homography=table)
     return out
 
 
 def captions_from_pixels(data: ExplorationData, cfg: LabelConfig, pixels: dict, present: np.ndarray,
                          scene_index: np.ndarray) -> list[list[str]]:
-    """Captions of N images from pixel coordinates ``{camera: (N, 4, 2)}`` of the objects."""
+    """Captions of N images from pixel coordinates ``{camera: (N, K, 2)}`` of the data's K
+    objects (:meth:`ExplorationData.object_arrays`)."""
     out: list[list[str]] = [[] for _ in range(len(present))]
     for s, (scene, labeler) in enumerate(labelers(data, cfg).items()):
         rows = np.nonzero(scene_index == s)[0]
@@ -145,7 +175,7 @@ def world_captions(data: ExplorationData, cfg: LabelConfig, positions, present, 
     for s, scene in enumerate(data.scenes):
         rows = np.nonzero(scene_index == s)[0]
         if len(rows):
-            table = world_table(positions[rows], present[rows], thresholds=cfg.world_thresholds())
+            table = world_table(positions[rows], present[rows], data.objects, cfg.world_thresholds())
             for r, cap in zip(rows, table.captions(SCENE_SHAPES[scene])):
                 out[r] = cap
     return out
@@ -177,14 +207,15 @@ def label_dataset(data_folder, cfg: LabelConfig, out: str | Path = LABELS, vlm=N
         for index in todo:
             name = f"shard_{index:05d}"
             arrays = data.shard(name)
-            grad = grounder.shard({k: v for k, v in arrays.items() if k.startswith("images_") or k == "scene"})
+            grad = grounder.shard({k: v for k, v in arrays.items()
+                                   if k.startswith("images_") or k in ("scene", "box_present")})
+            objects = data.object_arrays(arrays)  # the colours, and the box where the data has it
             # Training captions: from the Grad-CAM coordinates and the scene's object list only.
-            captions = captions_from_pixels(data, cfg, {c: grad[f"gradcam_xy_{c}"] for c in data.cameras},
-                                            arrays["present"], arrays["scene"])
+            captions = captions_from_pixels(data, cfg, gradcam_objects(data, grad), objects["present"], arrays["scene"])
             # Evaluation only: what the true coordinates say.
-            truth_pixel = captions_from_pixels(data, cfg, {c: arrays[f"pixels_{c}"] for c in data.cameras},
-                                               arrays["present"], arrays["scene"])
-            truth_world = world_captions(data, cfg, arrays["positions"], arrays["present"], arrays["scene"])
+            truth_pixel = captions_from_pixels(data, cfg, {c: objects[f"pixels_{c}"] for c in data.cameras},
+                                               objects["present"], arrays["scene"])
+            truth_world = world_captions(data, cfg, objects["positions"], objects["present"], arrays["scene"])
             save_npz(shards.path(index, ".npz"), **grad)
             save_json(shards.path(index, ".json", sub=ORACLE), {"pixel": truth_pixel, "world": truth_world})
             save_json(shards.path(index, ".json"), {"captions": captions})
@@ -193,6 +224,14 @@ def label_dataset(data_folder, cfg: LabelConfig, out: str | Path = LABELS, vlm=N
     finally:
         bar.close()
     return folder
+
+
+def gradcam_objects(data: ExplorationData, grad: dict) -> dict[str, np.ndarray]:
+    """Grad-CAM coordinates ``{camera: (N, K, 2)}`` of the data's objects: the colours' and,
+    where the data can hold the box, the box's as the last object."""
+    if not data.has_box:
+        return {c: grad[f"gradcam_xy_{c}"] for c in data.cameras}
+    return {c: with_box(grad[f"gradcam_xy_{c}"], grad[f"gradcam_box_xy_{c}"]) for c in data.cameras}
 
 
 def shard_done(data: ExplorationData, index: int) -> bool:

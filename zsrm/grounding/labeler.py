@@ -25,10 +25,16 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from zsrm.tasks.language import COLOURS, Task
+from zsrm.tasks.lexicon import CONTAINERS
 from zsrm.tasks.relations import CAMERAS, RELATIONS, WORLD_THRESHOLDS, Thresholds, camera_plane
 
 # Object widths (metres) of the scenes' shapes: the world thresholds are in metres.
 OBJECT_WIDTH = {"block": 0.06, "puck": 0.07}
+# The relations a container (the tabletop's box) takes part in, always as the last object: "a
+# red block inside of a box". Its centre is that of a large open box, so its other relations
+# (a block "on top of" the box it lies in, "a box inside of a block") would say little or the
+# wrong thing.
+CONTAINER_RELATIONS = frozenset({"inside_of"})
 
 
 def pixel_thresholds(block_width_px: Mapping[str, float], shape: str = "block",
@@ -50,6 +56,27 @@ def object_tuples(arity: int, k: int) -> np.ndarray:
     """All ordered tuples of ``arity`` different object indices out of ``k``: (T, arity)."""
     tuples = list(permutations(range(k), arity))
     return np.array(tuples, dtype=np.int64).reshape(len(tuples), arity)
+
+
+def relation_tuples(relation: str, objects: Sequence[str]) -> np.ndarray:
+    """The ordered object tuples (T, arity) a relation is read for: every tuple of different
+    objects (:func:`object_tuples`), except that a container appears only as the last object of
+    :data:`CONTAINER_RELATIONS`. Without a container, exactly :func:`object_tuples`.
+
+    >>> relation_tuples("inside_of", ("red", "green", "box")).tolist()
+    [[0, 1], [0, 2], [1, 0], [1, 2]]
+    >>> len(relation_tuples("left_of", ("red", "green", "box")))
+    2
+    """
+    tuples = object_tuples(RELATIONS[relation].arity, len(objects))
+    containers = [i for i, o in enumerate(objects) if o in CONTAINERS]
+    if not containers:
+        return tuples
+    is_container = np.isin(tuples, containers)
+    allowed = np.zeros_like(is_container)
+    if relation in CONTAINER_RELATIONS:
+        allowed[:, -1] = True
+    return tuples[~(is_container & ~allowed).any(axis=1)]
 
 
 def pixel_planes(pixels: Mapping[str, np.ndarray], table_homography: Mapping[str, np.ndarray] | None = None
@@ -91,8 +118,12 @@ class RelationTable:
         n = next(iter(self.holds.values())).shape[0] if self.holds else 0
         out: list[list[str]] = [[] for _ in range(n)]
         for relation, holds in self.holds.items():
-            texts = [Task(relation, [self.colours[i] for i in t], shape).text for t in self.tuples[relation]]
+            # Texts only of tuples that hold: a tuple with the box never holds in a puck scene,
+            # where its text would be no goal at all.
+            texts: dict[int, str] = {}
             for img, t in zip(*np.nonzero(holds)):
+                if t not in texts:
+                    texts[t] = Task(relation, [self.colours[i] for i in self.tuples[relation][t]], shape).text
                 out[img].append(texts[t])
         return out
 
@@ -105,6 +136,7 @@ def relation_table(planes: Mapping[str, np.ndarray], present: np.ndarray, thresh
                 that was not located (it then takes part in no relation).
     present:    (N, K) bool, the objects in each image.
     thresholds: camera -> the :class:`Thresholds` in that camera's units.
+    colours:    the K objects: colours, and the box (see :func:`relation_tuples`).
     """
     present = np.asarray(present, dtype=bool)
     if present.ndim != 2 or present.shape[1] != len(colours):
@@ -121,7 +153,7 @@ def relation_table(planes: Mapping[str, np.ndarray], present: np.ndarray, thresh
         xy = np.asarray(planes[rel.camera], dtype=np.float64)
         if xy.shape != present.shape + (2,):
             raise ValueError(f"{rel.camera} coordinates must have shape {present.shape + (2,)}, got {xy.shape}")
-        t = object_tuples(rel.arity, len(colours))
+        t = relation_tuples(name, colours)
         args = [xy[:, t[:, i]] for i in range(rel.arity)]  # each (N, T, 2)
         with np.errstate(invalid="ignore"):  # NaN coordinates compare False: no relation
             ok = rel(*args, thresholds=thresholds[rel.camera])
