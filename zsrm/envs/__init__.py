@@ -13,15 +13,12 @@ from zsrm.tasks.catalogue import PENDULUM_ID, PUSHING_ID, TABLETOP_ID
 
 EPISODE_STEPS = 100
 
-for _id, _entry in (
-    (TABLETOP_ID, "zsrm.envs.tabletop:TabletopEnv"),
-    (PUSHING_ID, "zsrm.envs.pushing:PushingEnv"),
-    (PENDULUM_ID, "zsrm.envs.pendulum:DoublePendulumPixelEnv"),
-):
-    if _id not in registry:
-        register(id=_id, entry_point=_entry, max_episode_steps=EPISODE_STEPS if _id != PENDULUM_ID else 1000)
-
 SCENES = {TABLETOP_ID: TabletopEnv, PUSHING_ID: PushingEnv, PENDULUM_ID: DoublePendulumPixelEnv}
+
+for _id, _cls in SCENES.items():
+    if _id not in registry:
+        register(id=_id, entry_point=f"{_cls.__module__}:{_cls.__name__}",
+                 max_episode_steps=EPISODE_STEPS if _id != PENDULUM_ID else 1000)
 
 
 def layout_version(env_id: str) -> int:

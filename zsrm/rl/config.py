@@ -101,8 +101,9 @@ class TrainConfig:
                              "base, oracle, curiosity or random")
         if self.layout_version == 0:  # a run of an older layout is another run
             from zsrm.envs import layout_version
+            from zsrm.tasks.catalogue import resolve
 
-            self.layout_version = layout_version(task_entry_id(self.goal))
+            self.layout_version = layout_version(resolve(self.goal).env_id)
         if self.reward == "zsrm":  # record which shipped student: a retrained one is another run
             import zsrm.fullmodel  # noqa: F401  (registers the shipped student)
             from zsrm.vlm.factory import pinned
@@ -137,13 +138,6 @@ class TrainConfig:
 
 # Relations whose tasks start with the moved block in the open fingers (start "auto").
 STACKING = ("on_top_of", "below")
-
-
-def task_entry_id(goal: str) -> str:
-    """The gymnasium id of a goal's scene."""
-    from zsrm.tasks.catalogue import resolve
-
-    return resolve(goal).env_id
 
 
 def goal_relation(goal: str) -> str | None:

@@ -128,7 +128,7 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
         return finish_random(cfg, out)
 
     device = resolve_device(device)
-    vlm = load_vlm(cfg.vlm).to(device)
+    vlm = load_vlm(cfg.vlm, device=device)
     camera = goal_camera(cfg.goal)
     done_steps, rows = 0, []
     state = None if fresh else load_checkpoint(out / "checkpoint", cfg)
