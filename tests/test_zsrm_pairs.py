@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from zsrm.fullmodel.pairs import CaptionedImages, caption_camera, caption_relation, complement_captions
+from zsrm.tasks.negatives import candidate_texts, negative_texts
 from zsrm.testing import synthetic_pairs
 
 FRONT = "a red block on the left of a blue block"
@@ -95,3 +96,17 @@ def test_complements_say_far_from_where_the_labeler_found_no_close_to():
     data = three_cameras(1, [caps], objects=[("block", ["red", "blue", "green"])])
     assert set(data.pair_texts()) == set(caps) | set(out)
     assert all(caption_camera(t) == "tilted" for t in out)
+
+
+def test_with_the_box_blocks_not_found_inside_it_are_outside_of_it():
+    caps = ["a red block inside of a box"]
+    out = complement_captions(caps, ["red", "blue", "box"], "block")
+    assert sorted(out) == ["a blue block far from a red block", "a blue block outside of a box",
+                           "a red block far from a blue block"]
+    assert complement_captions(caps, ["red", "blue"], "block") == ["a red block far from a blue block",
+                                                                   "a blue block far from a red block"]
+    assert caption_camera("a blue block outside of a box") == "tilted"
+    # The goal "inside of a box" ranks against its complement, and the complement against the goal.
+    assert negative_texts("a red block inside of a box")[-1] == "a red block outside of a box"
+    assert candidate_texts("a blue block outside of a box") == ["a blue block outside of a box",
+                                                                 "a blue block inside of a box"]

@@ -23,7 +23,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from zsrm.data.dataset import LABELS, ExplorationData
+from zsrm.data.dataset import BOX, LABELS, ExplorationData
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import Task
 from zsrm.tasks.negatives import COMPLEMENTS, caption_relation_camera, candidate_texts, complement_text
@@ -40,17 +40,17 @@ def caption_relation(caption: str) -> str:
     return caption_relation_camera(caption)[0]
 
 
-def complement_captions(captions: Sequence[str], colours: Sequence[str], shape: str) -> list[str]:
-    """Complement captions of one image: "a far from b" for every ordered pair of its objects
-    between which the labeler found no "close to" (see :data:`~zsrm.tasks.negatives.COMPLEMENTS`)."""
+def complement_captions(captions: Sequence[str], objects: Sequence[str], shape: str) -> list[str]:
+    """Complement captions of one image (see :data:`~zsrm.tasks.negatives.COMPLEMENTS`): "a far from
+    b" for every ordered pair of its coloured objects between which the labeler found no "close
+    to", and where ``objects`` holds the box, "a outside of a box" for every coloured object it
+    did not find inside of it."""
+    colours = [o for o in objects if o != BOX]
+    pairs = {"close_to": [(a, b) for a in colours for b in colours if a != b],
+             "inside_of": [(a, BOX) for a in colours] if BOX in objects else []}
     have = set(captions)
-    out = []
-    for relation in COMPLEMENTS:
-        for a in colours:
-            for b in colours:
-                if a != b and Task(relation, (a, b), shape).text not in have:
-                    out.append(complement_text(Task(relation, (a, b), shape)))
-    return out
+    tasks = (Task(relation, p, shape) for relation in COMPLEMENTS for p in pairs.get(relation, ()))
+    return [complement_text(t) for t in tasks if t.text not in have]
 
 
 class CaptionedImages:
@@ -60,8 +60,9 @@ class CaptionedImages:
     captions: N lists of canonical goal sentences (may be empty).
     groups:   (N,) ints; images of one group (an exploration episode) are never split
               between training and validation, as consecutive frames look alike.
-    objects:  optional (shape, colours) of each image's scene (the object list the labeler
-              reads too); with it, complement captions are added (:func:`complement_captions`).
+    objects:  optional (shape, objects) of each image's scene: its colours, and the box where it holds
+              it (what the labeler reads too); with it, complement captions are added
+              (:func:`complement_captions`).
     """
 
     def __init__(self, images: Mapping[str, np.ndarray], captions: Sequence[Sequence[str]],
@@ -178,13 +179,13 @@ class CaptionedImages:
         captions = data.captions(labels)  # Grad-CAM captions only (oracle=None)
         images, groups, objects = {c: [] for c in data.cameras}, [], []
         for s, name in enumerate(data.shards):
-            arrays = data.shard(name, [f"images_{c}" for c in data.cameras] + ["episode", "present", "scene"])
+            arrays = data.shard(name, [f"images_{c}" for c in data.cameras] + ["episode", "present", "scene"]
+                                + (["box_present"] if data.has_box else []))
             for c in data.cameras:
                 images[c].append(arrays[f"images_{c}"])
             # Episodes are numbered within a shard: make the group ids unique across shards.
             groups.append(s * 1_000_000 + arrays["episode"].astype(np.int64))
-            # Colours only, never the box: the labeler writes no "close to" with the box, so a
-            # "far from a box" complement would be said of blocks beside it or in it too.
-            objects += [(SCENE_SHAPES[data.scenes[sc]], [c for c, p in zip(data.colours, row) if p])
-                        for sc, row in zip(arrays["scene"], arrays["present"])]
+            present = data.object_arrays(arrays)["present"]  # over data.objects: the box last, where it can be
+            objects += [(SCENE_SHAPES[data.scenes[sc]], [o for o, p in zip(data.objects, row) if p])
+                        for sc, row in zip(arrays["scene"], present)]
         return cls({c: np.concatenate(v) for c, v in images.items()}, captions, np.concatenate(groups), objects)

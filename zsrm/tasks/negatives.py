@@ -41,8 +41,10 @@ IMPLIED_BY = {"in_between": frozenset({"left_of", "right_of"}), "inside_of": fro
 # but two objects on the tilted camera are often neither close nor inside: without a text for
 # that, "close to" would win the argmax against "inside of" on every frame. The complement
 # of close to, "far from", is a caption when neither holds (:func:`complement_captions`) and a
-# negative of close to.
-COMPLEMENTS = {"close_to": ("far_from", "far from")}
+# negative of close to. "Outside of" does the same for a block and the box: without it, the
+# texts ranked against "inside of a box" (left of it, behind it, ...) are never true on the
+# tilted camera, and which of them wins on a frame with the block beside the box is chance.
+COMPLEMENTS = {"close_to": ("far_from", "far from"), "inside_of": ("outside_of", "outside of")}
 COMPLEMENT_CAMERA = {name: RELATIONS[rel].camera for rel, (name, _) in COMPLEMENTS.items()}
 # An object phrase: "red block", or the box (one word).
 _PHRASE = r"(\w+(?: \w+)?)"
