@@ -59,7 +59,7 @@ class PickPlaceController:
             return np.array([*pos[objs[1]][:2], TABLE_TOP + 2 * tabletop.BOX_HALF_HEIGHT + 0.01 + W / 2])
         # Two block widths aside, but within the gripper's reach (else the script would hover
         # at the workspace edge with the block in the air for the rest of the episode).
-        reach = tabletop.X_RANGE[1] - 0.01
+        reach, reach_y = tabletop.X_RANGE[1] - 0.01, tabletop.Y_RANGE[1] - 0.01
         if rel == "left_of":
             return np.array([max(pos[objs[1]][0] - 2 * W, -reach), pos[objs[1]][1], on_table])
         if rel == "right_of":
@@ -68,9 +68,9 @@ class PickPlaceController:
             mid = (pos[objs[1]] + pos[objs[2]]) / 2
             return np.array([mid[0], mid[1], on_table])
         if rel == "in_front_of":
-            return pos[objs[1]] + (0, -2 * W, 0)
+            return np.array([pos[objs[1]][0], max(pos[objs[1]][1] - 2 * W, -reach_y), on_table])
         if rel == "behind":
-            return pos[objs[1]] + (0, 2 * W, 0)
+            return np.array([pos[objs[1]][0], min(pos[objs[1]][1] + 2 * W, reach_y), on_table])
         # close_to: in front of or behind the other block (the fingers open along x, so
         # beside it in x an opening finger would shove it away).
         side = np.sign(pos[objs[0]][1] - pos[objs[1]][1]) or 1.0

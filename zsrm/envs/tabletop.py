@@ -91,10 +91,12 @@ class TabletopEnv(MujocoPixelEnv):
             xs, ys = [side * 1.5 * w, -side * 1.5 * w], [0, 0]
         elif rel == "in_between":
             xs, ys = [side * 2.5 * w, -side * 2.5 * w, 0.0], [0, 0, 0]
+        # In front of / behind: the other block starts near the centre line, so that there is room
+        # to put the moved one down on its far side within the gripper's reach (Y_RANGE).
         elif rel == "in_front_of":
-            xs, ys = [-w, w], [1.3 * w, -1.3 * w]
+            xs, ys = [-w, w], [1.3 * w, -0.3 * w]
         elif rel == "behind":
-            xs, ys = [-w, w], [-1.3 * w, 1.3 * w]
+            xs, ys = [-w, w], [-1.3 * w, 0.3 * w]
         else:  # close_to, inside_of (the box starts two block widths from the block)
             xs, ys = [side * 2 * w, -side * 2 * w], [0, 0]
         planar = self.action_mode == "planar"
