@@ -75,8 +75,11 @@ def test_the_box_takes_part_only_as_what_a_block_is_inside_of():
     assert not any(c.startswith("a box") for c in captions)  # never "a box inside of a red block"
     assert not any("box" in c for c in captions if c != INSIDE)  # no other relation with the box
     assert labeler({"tilted": {"red": (20, 20), "box": (26, 20)}}) == []  # 6 px: close, not inside
-    # Without the box the tuples are every ordered tuple, as before.
-    assert len(relation_tuples("inside_of", COLOURS)) == 12 and len(relation_tuples("inside_of", OBJECTS)) == 16
+    # Inside of is read only with the box as the container; every other relation without the box.
+    assert len(relation_tuples("inside_of", COLOURS)) == 0 and len(relation_tuples("inside_of", OBJECTS)) == 4
+    assert len(relation_tuples("left_of", COLOURS)) == 12 and len(relation_tuples("left_of", OBJECTS)) == 12
+    stacked = labeler({"tilted": {"red": (20, 20), "green": (20.5, 20)}})  # centres 0.5 px apart
+    assert not any(" inside of " in c for c in stacked)
     world = world_table(np.array([[[0.0, 0.0, 0.434], [0.2, 0.0, 0.43], [np.nan] * 3, [np.nan] * 3,
                                    [0.01, 0.0, 0.42]]]), np.array([[True, True, False, False, True]]), OBJECTS)
     assert INSIDE in world.captions()[0]

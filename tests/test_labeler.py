@@ -8,7 +8,9 @@ from zsrm.tasks.language import Task
 from zsrm.tasks.relations import RELATIONS, WORLD_THRESHOLDS
 
 # 6 px per 6 cm block: 100 px per metre, so gap 1 px, eps_x 3, eps_y 9, close 10, inside 2.
-LABELER = SpatialLabeler.from_block_widths({"front": 6.0, "left": 6.0, "tilted": 6.0})
+# The colours and the box, which only "inside of" relates (a block inside of it).
+LABELER = SpatialLabeler.from_block_widths({"front": 6.0, "left": 6.0, "tilted": 6.0},
+                                           colours=("red", "green", "yellow", "blue", "box"))
 
 CASES = {
     # relation: (coords, objects that must hold, objects that must not)
@@ -23,8 +25,8 @@ CASES = {
     "behind": ({"left": {"red": (40, 30), "yellow": (20, 30)}}, ("yellow", "red"), ("red", "yellow")),
     "close_to": ({"tilted": {"red": (20, 20), "yellow": (25, 20), "blue": (50, 20)}},
                  ("red", "yellow"), ("red", "blue")),
-    "inside_of": ({"tilted": {"red": (20, 20), "yellow": (21, 20), "blue": (25, 20)}},
-                  ("red", "yellow"), ("red", "blue")),
+    "inside_of": ({"tilted": {"red": (20, 20), "box": (21, 20), "blue": (25, 20)}},
+                  ("red", "box"), ("blue", "box")),
 }
 
 
