@@ -246,3 +246,45 @@ def test_sweep_passes_model_folders_by_absolute_path(tmp_path, monkeypatch):
     assert absolute_if_folder("vlm-pendulum") == str(tmp_path / "vlm-pendulum")
     assert absolute_if_folder("scene") == "scene" and absolute_if_folder("student") == "student"
     assert Path(absolute_if_folder("vlm-pendulum")).is_absolute()
+
+
+# --- does a VLM know the pose? (zsrm eval-pose) --------------------------------------------------
+class PicksOneText:
+    """A stand-in VLM whose every frame matches sentence ``k`` best, whatever it shows."""
+
+    def __init__(self, k: int):
+        self.k = k
+
+    def similarity(self, images, texts):
+        import torch
+
+        sims = torch.zeros(len(images), len(texts))
+        sims[:, self.k] = 1.0
+        return sims
+
+
+def test_pose_eval_scores_the_base_rewards_rule_against_the_true_pose():
+    from zsrm.evaluation.pendulum_pose import pose_eval, pose_texts
+
+    assert pose_texts()[0] == GOAL and tuple(pose_texts()[1:]) == NEGATIVES
+    always_upright = pose_eval(PicksOneText(0), n_images=12, image_size=32, progress=False)
+    confusion = np.array(always_upright["meta"]["confusion_rows_true_cols_predicted"])
+    assert confusion.sum() == 12 and (confusion[:, 1:] == 0).all()
+    share_upright = confusion[0, 0] / 12
+    assert always_upright["accuracy"] == pytest.approx(share_upright) and always_upright["accuracy.upright"] == 1.0
+    assert always_upright["accuracy.fallen"] == 0.0 and always_upright["upright.recall"] == 1.0
+    assert always_upright["upright.precision"] == pytest.approx(share_upright)  # a survival bonus, not a pose
+    never_upright = pose_eval(PicksOneText(3), n_images=12, image_size=32, progress=False)
+    assert never_upright["upright.precision"] is None and never_upright["upright.f1"] == 0.0
+    assert never_upright["accuracy"] == pytest.approx(confusion[3].sum() / 12)  # same seed: same renders
+
+
+def test_eval_pose_command_writes_its_table(tmp_path, capsys):
+    out = tmp_path / "pose.json"
+    assert main(["eval-pose", "--vlm", "scene", "--images", "8", "--quiet", "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["meta"]["command"].startswith("zsrm eval-pose --vlm scene --images 8")
+    assert 0.0 <= result["accuracy"] <= 1.0 and len(result["meta"]["confusion_rows_true_cols_predicted"]) == 4
+    capsys.readouterr()
+    assert main(["eval-pose", "--vlm", "scene", "--images", "2"]) == 2
+    assert "--images must be at least 4" in capsys.readouterr().err

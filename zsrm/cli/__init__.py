@@ -23,6 +23,7 @@ COMMANDS = {
     "demo": demo.Demo,
     "pretrain-vlm": build.PretrainVlm,
     "eval-vlm": measure.EvalVlm,
+    "eval-pose": measure.EvalPose,
     "reward": measure.Reward,
     "reward-curve": measure.RewardCurve,
     "collect": build.Collect,

@@ -1,4 +1,4 @@
-"""Stages that measure: ``zsrm render``, ``scripted-eval``, ``eval-vlm``, ``reward``,
+"""Stages that measure: ``zsrm render``, ``scripted-eval``, ``eval-vlm``, ``eval-pose``, ``reward``,
 ``reward-curve``, ``eval-grounding`` and ``eval-reward``. Each writes its figures as a table
 (JSON or CSV) and, where there is one, a plot.
 
@@ -112,6 +112,34 @@ class EvalVlm:
         if failing:
             print(f"below {self.min_auroc}: {', '.join(failing)}", file=sys.stderr)
             return 1
+        return 0
+
+
+@dataclass
+class EvalPose:
+    """Whether a VLM knows the pendulum's pose in words: the pose each held-out render's sentences
+    pick, against its true pose, and "upright" as the pendulum's base reward decides it."""
+
+    vlm: str  # the pendulum VLM: a folder of zsrm pretrain-vlm --pendulum-scenes
+    images: int = 400  # held-out renders (poses drawn evenly)
+    seed: int = 1  # seed of the renders (pretraining renders its --seed, 0 by default)
+    out: str | None = None  # JSON path, e.g. results/pendulum_pose.json
+    quiet: bool = False  # no progress bars
+
+    def run(self) -> int:
+        from zsrm.evaluation.pendulum_pose import pose_eval
+        from zsrm.vlm import load_vlm
+
+        if self.images < 4:
+            raise ValueError("--images must be at least 4 (one per pose on average)")
+        if self.out:
+            files.check_writable(self.out)
+        result = pose_eval(load_vlm(self.vlm), n_images=self.images, seed=self.seed, progress=not self.quiet)
+        command = ["zsrm", "eval-pose", "--vlm", self.vlm, "--images", str(self.images), "--seed", str(self.seed)]
+        result["meta"]["command"] = shlex.join(command + (["--out", str(self.out)] if self.out else []))
+        print(json.dumps({k: v for k, v in result.items() if k != "meta"}, indent=2))
+        if self.out:
+            print(f"wrote {write_json(result, self.out)}")
         return 0
 
 
