@@ -288,3 +288,13 @@ def test_eval_pose_command_writes_its_table(tmp_path, capsys):
     capsys.readouterr()
     assert main(["eval-pose", "--vlm", "scene", "--images", "2"]) == 2
     assert "--images must be at least 4" in capsys.readouterr().err
+
+
+def test_the_shipped_pendulum_vlm_loads_by_name_and_leaves_the_scene_vlm_alone():
+    from zsrm.vlm import load_vlm
+    from zsrm.vlm.factory import pinned, shipped_digest
+
+    vlm = load_vlm("scene-pendulum")
+    assert vlm.meta["pendulum_images"] > 0 and pinned("scene-pendulum").startswith("scene-pendulum@")
+    assert shipped_digest("scene-pendulum") != shipped_digest("scene")
+    assert "pendulum_images" not in load_vlm("scene").meta

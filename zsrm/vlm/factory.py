@@ -30,6 +30,8 @@ DEFAULT_OPEN_CLIP_MODEL = "RN50"
 SPEC_HELP = ("'scene', a saved model folder, 'open_clip:MODEL' (e.g. open_clip:RN50), 'open_clip:MODEL:TAG', "
              "'open_clip:MODEL:/path/to/checkpoint.safetensors' or 'open_clip:MODEL:none'")
 HOW_TO_BUILD = {"scene": "build it with `zsrm pretrain-vlm` (about 15 minutes on 2 CPU cores)",
+                "scene-pendulum": "build it with `zsrm pretrain-vlm --pendulum-scenes 3000 --init zsrm/vlm/weights/scene "
+                                  "--steps 1000 --out zsrm/vlm/weights/scene-pendulum` (about 10 minutes on a CPU core)",
                 "student": "reinstall zsrm or train one with zsrm finetune --student"}
 
 

@@ -237,6 +237,8 @@ class SceneVLM(VisionLanguageModel):
 
 register_kind(SceneVLM.backend, SceneVLM.from_folder)
 register_shipped("scene", SHIPPED_SCENE_DIR)
+# The pendulum's VLM (Figure 4): the scene VLM taught the pole's pose in words, a model of its own.
+register_shipped("scene-pendulum", SHIPPED_SCENE_DIR.parent / "scene-pendulum")
 
 
 def create_scene_vlm(arch: str | SceneConfig = "default", seed: int | None = None, **overrides) -> SceneVLM:
