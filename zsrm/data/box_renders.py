@@ -25,11 +25,10 @@ import numpy as np
 
 from zsrm.data.renders import _SceneRenderer, load_cached_shards
 from zsrm.tasks.language import COLOURS
-from zsrm.tasks.lexicon import CONTAINERS
+from zsrm.tasks.lexicon import BOX
 from zsrm.tasks.relations import CAMERAS, WORLD_THRESHOLDS, holds_in_world
 
 STREAM = 3  # seed stream apart from the presence renders' (0 train, 1 eval) and the pendulum's (2)
-BOX = CONTAINERS[0]
 P_INSIDE = 1 / 3  # scenes that start with a block in the box
 MAX_ACTIONS = 10  # random actions after the reset, as in the presence renders
 SETTLE_STEPS = 5  # control steps a block put in the box settles for (as a reset settles its layout)

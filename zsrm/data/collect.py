@@ -25,10 +25,9 @@ from zsrm.data.dataset import ExplorationData
 from zsrm.data.shards import ShardFolder, save_npz
 from zsrm.tasks.catalogue import SCENE_IDS
 from zsrm.tasks.language import COLOURS
-from zsrm.tasks.lexicon import CONTAINERS
+from zsrm.tasks.lexicon import BOX
 from zsrm.tasks.relations import CAMERAS
 
-BOX = CONTAINERS[0]
 # Box scenes whose reset drops a block into the box: random actions almost never do, and a box
 # that never holds a block teaches no "inside of".
 P_BLOCK_IN_BOX = 0.5

@@ -11,12 +11,11 @@ from pathlib import Path
 import numpy as np
 
 from zsrm.data.shards import MANIFEST, load_npz, read_manifest
-from zsrm.tasks.lexicon import CONTAINERS
+from zsrm.tasks.lexicon import BOX
 from zsrm.vlm.files import ZsrmFileError, read_json
 
 LABELS = "labels"  # the default labels folder inside a dataset folder
 ORACLE = "oracle"  # inside the labels folder: true-coordinate captions, for evaluation only
-BOX = CONTAINERS[0]
 
 
 def with_box(objects: np.ndarray, box: np.ndarray) -> np.ndarray:

@@ -23,9 +23,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from zsrm.data.dataset import BOX, LABELS, ExplorationData
+from zsrm.data.dataset import LABELS, ExplorationData
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import Task
+from zsrm.tasks.lexicon import BOX
 from zsrm.tasks.negatives import COMPLEMENTS, caption_relation_camera, candidate_texts, complement_text
 
 

@@ -29,6 +29,7 @@ SHAPE_WORDS = {
 # The tabletop's one open box. It has no colour, so a goal names it by its noun alone ("put the
 # red block into the box"); in a Task it is the object "box", beside the colours.
 CONTAINERS = ("box",)
+BOX = CONTAINERS[0]
 CONTAINER_WORDS = {"box": "box", "container": "box"}
 DETERMINERS = frozenset({"a", "an", "the"})
 # Words between the determiner and the colour (or "box") that change nothing: all blocks are alike,
