@@ -197,6 +197,7 @@ def writer_commands(tmp_path, out, dataset) -> dict[str, list[str]]:
         "reward-data": ["reward-data", "--out", str(out)],
         "pretrain-vlm": ["pretrain-vlm", "--out", str(out), "--workdir", str(tmp_path / "work")],
         "eval-vlm": ["eval-vlm", "--out", str(out / "x.json")],
+        "eval-pose": ["eval-pose", "--vlm", "scene", "--out", str(out / "x.json")],
         "demo": ["demo", "--out", str(out)],
         "train": ["train", "--out", str(out), "--steps", "64"],
         "rollout": ["rollout", "random:stack", "--episodes", "1", "--out", str(out / "x.json")],
@@ -219,7 +220,7 @@ def test_every_writing_command_is_listed():
 
 @pytest.mark.parametrize("command", ["collect", "render", "scripted-eval", "reward-curve", "eval-reward", "label",
                                      "finetune", "eval-grounding", "reward-data", "pretrain-vlm", "eval-vlm",
-                                     "demo", "train", "rollout", "sweep", "plot", "reproduce",
+                                     "eval-pose", "demo", "train", "rollout", "sweep", "plot", "reproduce",
                                      "multitask-policies", "multitask-rollouts", "distill", "eval-multitask",
                                      "eval-goals"])
 def test_an_unwritable_output_is_one_line_before_any_work(command, dataset, tmp_path, capsys, monkeypatch):
