@@ -176,8 +176,9 @@ def committed_results(report: Report):
     report.heading("Grounding: Grad-CAM finds the objects (Figure 3)", 3)
     report.figure(RESULTS / "figure3.png", "Grad-CAM heat maps of object phrases and their argmax")
     grounding = _load("grounding.json") or {}
-    report.table(["relation", "labeler F1"], [[k.split(".", 1)[1], f"{v:.2f}"] for k, v in grounding.items()
-                                                 if k.startswith("f1.")])
+    # n/a: a relation with no true or labelled instance in the data (inside of, without the box)
+    report.table(["relation", "labeler F1"], [[k.split(".", 1)[1], "n/a" if v is None else f"{v:.2f}"]
+                                               for k, v in grounding.items() if k.startswith("f1.")])
     report.command("zsrm eval-grounding data/grounding --out results/grounding.json --figure results/figure3.png")
     report.heading("Base reward against the full reward along trajectories (Figure 5)", 3)
     report.figure(RESULTS / "figure5.png", "base reward along a scripted push: it does not capture 'close to'")
