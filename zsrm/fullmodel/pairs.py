@@ -24,9 +24,9 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from zsrm.data.dataset import LABELS, ExplorationData
+from zsrm.grounding.labeler import relation_tuples
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import Task
-from zsrm.tasks.lexicon import BOX
 from zsrm.tasks.negatives import COMPLEMENTS, caption_relation_camera, candidate_texts, complement_text
 
 
@@ -42,15 +42,14 @@ def caption_relation(caption: str) -> str:
 
 
 def complement_captions(captions: Sequence[str], objects: Sequence[str], shape: str) -> list[str]:
-    """Complement captions of one image (see :data:`~zsrm.tasks.negatives.COMPLEMENTS`): "a far from
-    b" for every ordered pair of its coloured objects between which the labeler found no "close
-    to", and where ``objects`` holds the box, "a outside of a box" for every coloured object it
-    did not find inside of it."""
-    colours = [o for o in objects if o != BOX]
-    pairs = {"close_to": [(a, b) for a in colours for b in colours if a != b],
-             "inside_of": [(a, BOX) for a in colours] if BOX in objects else []}
+    """Complement captions of one image (see :data:`~zsrm.tasks.negatives.COMPLEMENTS`): for each
+    complemented relation, every object tuple the labeler reads it for
+    (:func:`~zsrm.grounding.labeler.relation_tuples`) that it did not caption: "a far from b" for
+    coloured objects not found close to each other, and where ``objects`` holds the box, "a
+    outside of a box" for coloured objects not found inside of it."""
     have = set(captions)
-    tasks = (Task(relation, p, shape) for relation in COMPLEMENTS for p in pairs.get(relation, ()))
+    tasks = (Task(relation, [objects[i] for i in t], shape)
+             for relation in COMPLEMENTS for t in relation_tuples(relation, objects))
     return [complement_text(t) for t in tasks if t.text not in have]
 
 
