@@ -107,3 +107,20 @@ def test_a_box_caption_pairs_with_the_tilted_frame_and_has_inside_of_negatives()
     assert negatives and all(t.endswith(" a box") for t in negatives)
     assert Task("on_top_of", ("red", "box")).text in negatives and INSIDE not in negatives
     assert set(candidate_texts(INSIDE)) <= set(data.vocabulary())
+
+
+def test_labels_refine_on_the_tilted_camera_with_calibrated_silhouettes(boxes, tmp_path):
+    import json
+
+    manifest = json.loads((boxes.folder / "labels" / "manifest.json").read_text())
+    sils = manifest["silhouettes"]
+    assert set(sils) == {"tabletop", "pushing"} and set(sils["tabletop"]) == {"tilted"}
+    assert set(sils["tabletop"]["tilted"]) == {"object", "box"} and set(sils["pushing"]["tilted"]) == {"object"}
+    assert sils["tabletop"]["tilted"]["object"]["area"] > 0 and not sils["tabletop"]["tilted"]["box"]["by_colour"]
+    # Without refinement the Grad-CAM points are kept as they are, and no calibration is made.
+    label_dataset(boxes.folder, LabelConfig(vlm="testing", locate="argmax", cell_centres="grid", refine="none"),
+                  out=tmp_path / "plain", vlm=ColourVLM(32), progress=False)
+    plain = json.loads((tmp_path / "plain" / "manifest.json").read_text())
+    assert "silhouettes" not in plain
+    refined, kept = (np.load(f / "shard_00000.npz")["gradcam_xy_front"] for f in (boxes.folder / "labels", tmp_path / "plain"))
+    np.testing.assert_array_equal(refined, kept)  # the front camera is never refined

@@ -32,12 +32,18 @@ import numpy as np
 from zsrm.data.dataset import LABELS, ORACLE, ExplorationData, with_box
 from zsrm.data.shards import ShardFolder, save_json, save_npz
 from zsrm.grounding.gradcam import GradCAM
-from zsrm.grounding.labeler import SpatialLabeler, pixel_thresholds, world_table
+from zsrm.grounding.labeler import OBJECT_WIDTH, SpatialLabeler, pixel_thresholds, world_table
+from zsrm.grounding.silhouette import Silhouette, calibrate, refine_points
 from zsrm.tasks.catalogue import SCENE_SHAPES
+from zsrm.tasks.lexicon import BOX
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import WORLD_THRESHOLDS, Thresholds
 from zsrm.vlm.factory import DEFAULT_VLM
 from zsrm.vlm.presence import BOX_PHRASE
+
+
+# The shipped scene VLM was never shown the box; this one was (zsrm pretrain-vlm --box-scenes).
+BOX_VLM = "scene-box"
 
 
 @dataclass
@@ -51,6 +57,8 @@ class LabelConfig:
     cell_centres: Literal["grid", "receptive_field"] = "receptive_field"  # pixel position of each Grad-CAM cell: its geometric centre, or the peak of its measured input gradient
     template: str = "{}"  # how a phrase is written to the text tower, e.g. "a {}"
     batch_size: int = 64  # images per Grad-CAM batch
+    refine: Literal["none", "silhouette"] = "silhouette"  # on the table-plane (tilted) camera, move each Grad-CAM point to its object's silhouette centre (zsrm.grounding.silhouette), or keep it
+    box_vlm: str | None = None  # the VLM whose Grad-CAM finds the box, in data collected with it (a box-aware VLM); default: scene-box with the scene VLM (shipped: pretrained on box scenes), else --vlm itself
     thresholds: dict = field(default_factory=lambda: asdict(WORLD_THRESHOLDS), metadata={"cli": False})  # Table 1's, in metres
 
     def world_thresholds(self) -> Thresholds:
@@ -65,7 +73,7 @@ class Grounder:
     """Grad-CAM coordinates of every colour's phrase on every camera of a dataset's images."""
 
     def __init__(self, vlm, cfg: LabelConfig, data: ExplorationData, centres: list | None = None,
-                 fine_centres: list | None = None):
+                 fine_centres: list | None = None, box_vlm=None, silhouettes: dict | None = None):
         self.cfg, self.data = cfg, data
         # Colours the data can hold: the contrast of each phrase is against the other ones.
         self.allowed = [c for c in COLOURS if c not in data.config["exclude"]]
@@ -90,13 +98,26 @@ class Grounder:
         # Grad-CAM is untouched, so their coordinates are those of data without the box.
         self.box_gradcam = None
         if data.has_box:
-            self.box_gradcam = GradCAM(vlm, target=cfg.target, locate=cfg.locate, cell_centres=cfg.cell_centres,
+            self.box_gradcam = GradCAM(vlm if box_vlm is None else box_vlm, target=cfg.target, locate=cfg.locate, cell_centres=cfg.cell_centres,
                                        contrast=[cfg.template.format(p) for p in phrases_for("tabletop", self.allowed)],
                                        presence_threshold=None, batch_size=cfg.batch_size)
         for g in list(self.gradcam.values()) + ([self.box_gradcam] if self.box_gradcam else []):
             g.set_centres(self.centres, (size, size))
             if self.fine_centres is not None:
                 g.set_centres(self.fine_centres, (size, size), fine=True)
+        # {scene: {camera: {"object": Silhouette, "box": Silhouette}}} of the table-plane cameras,
+        # measured once (and kept in the labels manifest, so that a resumed run refines alike).
+        self.silhouettes = {}
+        if cfg.refine == "silhouette":
+            if silhouettes is None:
+                silhouettes = {scene: calibrate_scene(data, scene) for scene in data.scenes}
+            self.silhouettes = {scene: {cam: {k: Silhouette.from_json(v) if isinstance(v, dict) else v
+                                              for k, v in sils.items()} for cam, sils in cams.items()}
+                                for scene, cams in silhouettes.items()}
+
+    def silhouettes_json(self) -> dict:
+        return {scene: {cam: {k: v.to_json() for k, v in sils.items()} for cam, sils in cams.items()}
+                for scene, cams in self.silhouettes.items()}
 
     def shard(self, arrays: dict) -> dict[str, np.ndarray]:
         """Per camera: ``gradcam_xy_<cam>`` (n, 4, 2), ``gradcam_score_<cam>``,
@@ -116,10 +137,12 @@ class Grounder:
                 rows = np.nonzero(arrays["scene"] == s)[0]
                 if not len(rows):
                     continue
-                res = self.gradcam[scene](arrays[f"images_{cam}"][rows], phrases_for(scene, self.allowed))
+                images = arrays[f"images_{cam}"][rows]
+                res = self.gradcam[scene](images, phrases_for(scene, self.allowed))
                 if maps is None:
                     maps = np.zeros((n, k) + res.maps.shape[-2:], np.float16)
-                xy[rows[:, None], cols] = res.xy
+                sil = self.silhouettes.get(scene, {}).get(cam)
+                xy[rows[:, None], cols] = res.xy if sil is None else refine_points(images, res.xy, sil["object"])
                 score[rows[:, None], cols] = res.score
                 peak[rows[:, None], cols] = res.peak
                 maps[rows[:, None], cols] = res.maps
@@ -138,8 +161,40 @@ class Grounder:
         if len(rows):
             res = self.box_gradcam(images[rows], [BOX_PHRASE])
             xy[rows], score[rows], peak[rows], maps[rows] = res.xy[:, 0], res.score[:, 0], res.peak[:, 0], res.maps[:, 0]
+            sil = self.silhouettes.get("tabletop", {}).get(cam)  # only tabletop scenes hold the box
+            if sil is not None:
+                xy[rows] = refine_points(images[rows], xy[rows], sil["box"])
         return {f"gradcam_box_xy_{cam}": xy, f"gradcam_box_score_{cam}": score, f"gradcam_box_peak_{cam}": peak,
                 f"gradcam_box_map_{cam}": maps}
+
+
+def calibrate_scene(data: ExplorationData, scene: str) -> dict[str, dict[str, Silhouette]]:
+    """The silhouettes (:mod:`zsrm.grounding.silhouette`) of a scene's object, and of the box
+    where the data can hold it, on each of its table-plane cameras, from calibration renders."""
+    import gymnasium as gym
+
+    import zsrm.envs  # noqa: F401  (registers the ids)
+    from zsrm.envs.tabletop import BOX_HALF
+    from zsrm.tasks.catalogue import SCENE_IDS
+
+    cameras = list(data.table_homography.get(scene, {}))
+    if not cameras:
+        return {}
+    box = data.has_box and scene == "tabletop"
+    objects = tuple(data.colours) + ((BOX,) if box else ())
+    size, shape = data.config["image_size"], SCENE_SHAPES[scene]
+    env = gym.make(SCENE_IDS[scene], task=None, objects=objects, cameras=tuple(cameras), image_size=size).unwrapped
+    try:
+        env.reset(seed=0)
+        out = {}
+        for cam in cameras:
+            width = data.block_width_px[scene][cam]
+            out[cam] = {"object": calibrate(env, cam, size, objects[0], True, width)}
+            if box:
+                out[cam]["box"] = calibrate(env, cam, size, BOX, False, width * 2 * BOX_HALF / OBJECT_WIDTH[shape])
+        return out
+    finally:
+        env.close()
 
 
 def labelers(data: ExplorationData, cfg: LabelConfig) -> dict[str, SpatialLabeler]:
@@ -194,10 +249,19 @@ def label_dataset(data_folder, cfg: LabelConfig, out: str | Path = LABELS, vlm=N
         from zsrm.vlm import load_vlm
 
         vlm = load_vlm(cfg.vlm)
+    box_vlm = None
+    box_spec = cfg.box_vlm or (BOX_VLM if cfg.vlm == DEFAULT_VLM else None)
+    if box_spec is not None and data.has_box:
+        from zsrm.vlm import load_vlm
+
+        box_vlm = load_vlm(box_spec)
     shards = ShardFolder(folder, kind="labels", config=asdict(cfg), n_shards=data.manifest["n_shards"],
                          extra={"data": str(Path(data_folder).resolve())})
-    grounder = Grounder(vlm, cfg, data, shards.manifest.get("centres"), shards.manifest.get("fine_centres"))
+    grounder = Grounder(vlm, cfg, data, shards.manifest.get("centres"), shards.manifest.get("fine_centres"),
+                        box_vlm=box_vlm, silhouettes=shards.manifest.get("silhouettes"))
     shards.manifest.setdefault("centres", grounder.centres.tolist())
+    if grounder.silhouettes:
+        shards.manifest.setdefault("silhouettes", grounder.silhouettes_json())
     if grounder.fine_centres is not None:
         shards.manifest.setdefault("fine_centres", grounder.fine_centres.tolist())
     todo = [i for i in shards.pending() if shard_done(data, i)]

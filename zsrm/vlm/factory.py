@@ -32,6 +32,8 @@ SPEC_HELP = ("'scene', a saved model folder, 'open_clip:MODEL' (e.g. open_clip:R
 HOW_TO_BUILD = {"scene": "build it with `zsrm pretrain-vlm` (about 15 minutes on 2 CPU cores)",
                 "scene-pendulum": "build it with `zsrm pretrain-vlm --pendulum-scenes 3000 --init zsrm/vlm/weights/scene "
                                   "--steps 1000 --out zsrm/vlm/weights/scene-pendulum` (about 10 minutes on a CPU core)",
+                "scene-box": "build it with `zsrm pretrain-vlm --box-scenes 2000 --init zsrm/vlm/weights/scene "
+                             "--steps 600 --out zsrm/vlm/weights/scene-box` (about 5 minutes on a CPU core)",
                 "student": "reinstall zsrm or train one with zsrm finetune --student"}
 
 

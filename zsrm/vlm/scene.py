@@ -239,6 +239,9 @@ register_kind(SceneVLM.backend, SceneVLM.from_folder)
 register_shipped("scene", SHIPPED_SCENE_DIR)
 # The pendulum's VLM (Figure 4): the scene VLM taught the pole's pose in words, a model of its own.
 register_shipped("scene-pendulum", SHIPPED_SCENE_DIR.parent / "scene-pendulum")
+# The box's VLM: the scene VLM taught "a box" on box scenes; the labeler's Grad-CAM of the box only
+# (training its whole network costs the colours precision, so they keep the scene VLM).
+register_shipped("scene-box", SHIPPED_SCENE_DIR.parent / "scene-box")
 
 
 def create_scene_vlm(arch: str | SceneConfig = "default", seed: int | None = None, **overrides) -> SceneVLM:
