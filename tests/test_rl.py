@@ -95,9 +95,11 @@ def test_config_is_checked():
     with pytest.raises(ValueError, match="action_repeat"):
         TrainConfig(action_repeat=3)
     assert TrainConfig(action_repeat=4).episode_decisions == 25
-    # A zsrm run records which shipped student it used; other rewards keep the name as given.
+    # A zsrm run records which shipped student it used; no other reward reads it, so their runs
+    # are the same whatever it says (a sweep pinned to a retired student still finds them).
     assert TrainConfig(reward="zsrm").reward_model.startswith("student@")
     assert TrainConfig(reward="oracle").reward_model == "student"
+    assert TrainConfig(reward="oracle", reward_model="student@0123456789ab").identity() == TrainConfig().identity()
 
 
 def test_mean_se():

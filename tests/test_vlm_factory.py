@@ -1,5 +1,6 @@
 """load_vlm specs (zsrm/vlm/factory.py, zsrm/vlm/registry.py) and the torchvision import guard (zsrm/vlm/compat.py)."""
 import json
+from pathlib import Path
 
 import pytest
 
@@ -36,6 +37,24 @@ def test_a_pinned_shipped_model_loads_only_as_that_version(tmp_path, monkeypatch
     with pytest.raises(ValueError, match="retrained since"):
         load_reward_backbone(spec)
     assert pinned("student") != spec
+    # A version kept beside it under retired/ still loads by its pin.
+    kept = tmp_path / "retired" / spec
+    shutil.copytree(SHIPPED_STUDENT_DIR, kept)
+    load_reward_backbone(spec)
+    (kept / "model.safetensors").write_bytes(b"not those weights")
+    with pytest.raises(ValueError, match="retrained since"):
+        load_reward_backbone(spec)
+
+
+def test_the_student_that_trained_the_learning_runs_is_kept():
+    """results/rl's zsrm trials pin the student trained before the box: it ships under retired/."""
+    from zsrm.fullmodel import load_reward_backbone
+
+    pins = {json.loads(p.read_text())["config"]["reward_model"]
+            for p in (Path(__file__).parent.parent / "results" / "rl" / "trials").glob("*-zsrm-*.json")}
+    assert pins and all(p.startswith("student@") for p in pins)
+    for pin in pins:
+        load_reward_backbone(pin)
 
 
 def test_saved_folders_load_by_path(tmp_path):

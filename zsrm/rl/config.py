@@ -109,6 +109,8 @@ class TrainConfig:
             from zsrm.vlm.factory import pinned
 
             self.reward_model = pinned(self.reward_model)
+        else:  # only the zsrm reward reads it: any other run is the same run whatever it says
+            self.reward_model = "student"
         if 100 % self.action_repeat:
             raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
 

@@ -34,7 +34,9 @@ HOW_TO_BUILD = {"scene": "build it with `zsrm pretrain-vlm` (about 15 minutes on
                                   "--steps 1000 --out zsrm/vlm/weights/scene-pendulum` (about 10 minutes on a CPU core)",
                 "scene-box": "build it with `zsrm pretrain-vlm --box-scenes 2000 --init zsrm/vlm/weights/scene "
                              "--steps 600 --out zsrm/vlm/weights/scene-box` (about 5 minutes on a CPU core)",
-                "student": "reinstall zsrm or train one with zsrm finetune --student"}
+                "student": "reinstall zsrm or train one with `zsrm reward-data --images 8000 --shard-size 250 --p-box 0.3 "
+                           "--out data/zsrm/box-8k --labels labels-sil` then `zsrm finetune --student --data "
+                           "data/zsrm/box-8k --labels labels-sil --steps 4000`"}
 
 
 def shipped_digest(name: str) -> str:
@@ -59,6 +61,18 @@ def shipped_folder(name: str) -> Path:
     return folder
 
 
+def retired_folder(name: str, digest: str) -> Path | None:
+    """The folder of an earlier version of a shipped model, kept beside it as
+    ``retired/<name>@<digest>`` so that runs pinned to it still load it; None if not kept."""
+    import hashlib
+
+    folder = SHIPPED[name].parent / "retired" / f"{name}@{digest}"
+    weights = folder / WEIGHTS_FILE
+    if weights.is_file() and hashlib.sha256(weights.read_bytes()).hexdigest()[:12] == digest:
+        return folder
+    return None
+
+
 def load_vlm(spec: str | Path = DEFAULT_VLM, device: str | torch.device = "cpu") -> VisionLanguageModel:
     """A VLM from a spec string (see the module docstring), in eval mode."""
     if isinstance(spec, Path):
@@ -69,6 +83,9 @@ def load_vlm(spec: str | Path = DEFAULT_VLM, device: str | torch.device = "cpu")
     name, _, digest = spec.partition("@")
     if digest and name in SHIPPED:  # a pinned version (see pinned): only those weights will do
         if shipped_digest(name) != digest:
+            retired = retired_folder(name, digest)
+            if retired is not None:
+                return load_folder(retired, device)
             raise ValueError(f"{spec!r} is the shipped {name} model of version {digest}, but the installed one is "
                              f"{shipped_digest(name)} (retrained since); install that zsrm version, or retrain "
                              f"with the installed model")
