@@ -205,6 +205,9 @@ def test_rewards_that_read_a_relation_refuse_the_pendulum():
         with pytest.raises(ValueError, match="pendulum"):
             TrainConfig(goal="pendulum", reward=reward)
     assert TrainConfig(goal="pendulum", reward="curiosity").start == "above"
+    # The scene VLM never saw the pole; the pendulum reads the one that did.
+    assert TrainConfig(goal="pendulum", reward="base").vlm == "scene-pendulum"
+    assert TrainConfig(goal="stack", reward="base").vlm == "scene"
 
 
 # --- sweep summary and Figure 4 ------------------------------------------------------------------
@@ -223,6 +226,9 @@ def test_gathered_pendulum_summary_and_figure4(tmp_path, capsys):
 
     assert [t["name"] for t in trial_grid(["pendulum"], ["base", "oracle"], [0])] == ["pendulum-base-0",
                                                                                      "pendulum-oracle-0"]
+    # One sweep over the manipulation tasks and the pendulum: the pendulum skips zsrm and vice.
+    names = [t["name"] for t in trial_grid(["stack", "pendulum"], ["oracle", "zsrm", "vice"], [0])]
+    assert names == ["stack-oracle-0", "stack-zsrm-0", "stack-vice-0", "pendulum-oracle-0"]
     summary = gather(synthetic_summaries())
     assert summary["pendulum"]["base"]["final_mean"] == pytest.approx(401.0)
     assert summary["pendulum"]["oracle"]["seeds"] == 3

@@ -31,7 +31,7 @@ class TrainConfig:
     """for --reward zsrm: binary (the paper's), or margin (dense: goal score minus best negative)"""
     vlm: str = "scene"
     """VLM whose frozen image trunk (its Grad-CAM layer) the policy sees through, and that scores the
-    base reward (for the pendulum: a folder of zsrm pretrain-vlm --pendulum-scenes)"""
+    base reward (for the pendulum, scene means scene-pendulum: the scene VLM taught the pole's pose)"""
     n_envs: int = 8
     """parallel training envs (one process, one batched reward call per step)"""
     action_repeat: int = 2
@@ -96,9 +96,11 @@ class TrainConfig:
         relation = goal_relation(self.goal)
         if self.start == "auto":
             self.start = "around" if relation in STACKING else "above"
-        if relation is None and self.reward in ("zsrm", "vice"):
+        if not takes_reward(self.goal, self.reward):
             raise ValueError(f"the {self.reward} reward reads a spatial relation; the pendulum trains with "
                              "base, oracle, curiosity or random")
+        if relation is None and self.vlm == "scene":  # the scene VLM never saw the pole: its pose words are here
+            self.vlm = PENDULUM_VLM
         if self.layout_version == 0:  # a run of an older layout is another run
             from zsrm.envs import layout_version
             from zsrm.tasks.catalogue import resolve
@@ -136,6 +138,16 @@ class TrainConfig:
         if unknown:
             raise ValueError(f"unknown training settings: {', '.join(sorted(unknown))}")
         return cls(**d)
+
+
+# The pendulum's VLM by default: the scene VLM taught the pole's pose in words (Figure 4).
+PENDULUM_VLM = "scene-pendulum"
+
+
+def takes_reward(goal: str, reward: str) -> bool:
+    """Can a run of ``goal`` train with ``reward``? The zsrm and vice rewards read a spatial
+    relation, which the pendulum has not."""
+    return not (goal_relation(goal) is None and reward in ("zsrm", "vice"))
 
 
 # Relations whose tasks start with the moved block in the open fingers (start "auto").

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zsrm.rl.config import TrainConfig
+from zsrm.rl.config import TrainConfig, takes_reward
 from zsrm.rl.evaluate import mean_se
 from zsrm.vlm.files import write_text
 
@@ -39,12 +39,15 @@ def trial_name(task: str, reward: str, seed: int) -> str:
 
 
 def trial_grid(tasks, rewards, seeds, overrides: dict | None = None) -> list[dict]:
-    """One trial per task x reward x seed: its name and its TrainConfig as a dict. Seed-major,
-    so a sweep cut short has every task and reward on its first seeds."""
+    """One trial per task x reward x seed that the task takes (the pendulum takes no zsrm or vice
+    reward): its name and its TrainConfig as a dict. Seed-major, so a sweep cut short has every
+    task and reward on its first seeds."""
     trials = []
     for seed in seeds:
         for task in tasks:
             for reward in rewards:
+                if not takes_reward(task, reward):
+                    continue
                 cfg = TrainConfig(**{**(overrides or {}), "goal": task, "reward": reward, "seed": int(seed)})
                 trials.append({"name": trial_name(task, reward, seed), "config": cfg.to_dict()})
     return trials
