@@ -353,7 +353,8 @@ def figure3(data_folder, vlm, out: str | Path, labels: str | Path = LABELS, inde
     idx = [COLOURS.index(c) for c in phrases]
     index, one = _one_image(data, idx, index, phrases)
     shape = SCENE_SHAPES[data.scenes[int(one["scene"][0])]]
-    grounder = Grounder(vlm, cfg, data, manifest.get("centres"), manifest.get("fine_centres"))
+    grounder = Grounder(vlm, cfg, data, manifest.get("centres"), manifest.get("fine_centres"),
+                        silhouettes=manifest.get("silhouettes"))
     grad = grounder.shard({k: v for k, v in one.items() if k.startswith("images_") or k == "scene"})
     size = data.config["image_size"]
 
@@ -379,7 +380,9 @@ def figure3(data_folder, vlm, out: str | Path, labels: str | Path = LABELS, inde
         for ax in axes[r]:
             ax.set_xticks([])
             ax.set_yticks([])
-    fig.suptitle(f"Grad-CAM grounding ({cfg.vlm}), image {index}: + located ({cfg.locate}), o true centre", fontsize=9)
+    refined = "; tilted: silhouette-refined" if grounder.silhouettes else ""
+    fig.suptitle(f"Grad-CAM grounding ({cfg.vlm}), image {index}: + located ({cfg.locate}{refined}), o true centre",
+                 fontsize=9)
     return save_figure(fig, out)
 
 
