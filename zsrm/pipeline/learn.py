@@ -138,7 +138,8 @@ class Sweep:
                              "most 100 control steps" if "pendulum" in self.tasks else ""),
                 "command": f"zsrm sweep --tasks {' '.join(self.tasks)} --rewards {' '.join(self.rewards)} "
                            f"--seeds {' '.join(map(str, self.seeds))} --steps {self.steps} --out {self.out}"
-                           + (f" --vlm {self.vlm}" if self.vlm != "scene" else ""),
+                           + (f" --vlm {self.vlm}" if self.vlm != "scene" else "")
+                           + (f" --reward-model {self.reward_model}" if self.reward_model != "student" else ""),
                 "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU"}
 
 
