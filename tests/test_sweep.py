@@ -6,7 +6,9 @@ import subprocess
 import sys
 import time
 
-from zsrm.rl.sweep import gather, is_finished, keep_trial_summaries, trial_grid
+import pytest
+
+from zsrm.rl.sweep import gather, is_finished, keep_trial_summaries, start_ray, trial_grid
 
 TINY = dict(steps=512, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, keypoints=4,
             eval_every=128, checkpoint_every=128)
@@ -49,3 +51,30 @@ def test_two_trial_sweep_is_killed_and_resumed(tmp_path):
     result = summary["push_close"]["oracle"]
     assert result["seeds"] == 2 and result["steps"] == 512
     assert [row["env_steps"] for row in result["curve"]] == [128, 256, 384, 512]
+
+
+class SlowRay:
+    """A stand-in for the ray module whose local node times out ``slow`` times before it starts."""
+
+    def __init__(self, slow: int, message: str = "The current node timed out during startup."):
+        self.slow, self.message, self.inits, self.shutdowns = slow, message, 0, 0
+
+    def init(self, **kwargs):
+        self.inits += 1
+        if self.inits <= self.slow:
+            raise Exception(self.message)
+
+    def shutdown(self):
+        self.shutdowns += 1
+
+
+def test_a_ray_that_starts_slowly_is_tried_again():
+    ray = SlowRay(slow=2)
+    start_ray(ray, num_cpus=2, address=None)
+    assert ray.inits == 3 and ray.shutdowns == 2
+    with pytest.raises(Exception, match="timed out during startup"):
+        start_ray(SlowRay(slow=3), num_cpus=2, address=None)
+    other = SlowRay(slow=1, message="no such cluster")
+    with pytest.raises(Exception, match="no such cluster"):  # other failures are not retried
+        start_ray(other, num_cpus=2, address="ray://nowhere:10001")
+    assert other.inits == 1

@@ -97,10 +97,7 @@ def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | None = None
         return []
     for t in todo:
         t["root"] = str(root)
-    if address:
-        ray.init(address=address, ignore_reinit_error=True, log_to_driver=False)
-    else:
-        ray.init(num_cpus=num_cpus, include_dashboard=False, ignore_reinit_error=True, log_to_driver=False)
+    start_ray(ray, num_cpus, address)
     try:
         trainable = tune.with_resources(run_trial, {"cpu": cpus_per_trial})
         tuner = tune.Tuner(trainable, param_space=tune.grid_search(todo),
@@ -111,6 +108,23 @@ def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | None = None
     finally:
         ray.shutdown()
     return [t["name"] for t in todo]
+
+
+def start_ray(ray, num_cpus: int, address: str | None, tries: int = 3) -> None:
+    """``ray.init`` on a cluster (``address``) or a local Ray of ``num_cpus``. Ray gives a local
+    node 30 s to start, which a loaded machine can overrun: such a timeout is tried again."""
+    for attempt in range(1, tries + 1):
+        try:
+            if address:
+                ray.init(address=address, ignore_reinit_error=True, log_to_driver=False)
+            else:
+                ray.init(num_cpus=num_cpus, include_dashboard=False, ignore_reinit_error=True, log_to_driver=False)
+            return
+        except Exception as e:  # Ray raises a bare Exception for this
+            if "timed out during startup" not in str(e) or attempt == tries:
+                raise
+            print(f"Ray did not start in time ({attempt} of {tries} tries); trying again", flush=True)
+            ray.shutdown()
 
 
 def gather(summaries) -> dict:
