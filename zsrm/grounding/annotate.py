@@ -245,16 +245,12 @@ def label_dataset(data_folder, cfg: LabelConfig, out: str | Path = LABELS, vlm=N
     if not data.shards:
         raise ValueError(f"{data_folder} holds no finished shard: run zsrm collect first")
     folder = data.labels_folder(out)
+    from zsrm.vlm import load_vlm
+
     if vlm is None:
-        from zsrm.vlm import load_vlm
-
         vlm = load_vlm(cfg.vlm)
-    box_vlm = None
     box_spec = cfg.box_vlm or (BOX_VLM if cfg.vlm == DEFAULT_VLM else None)
-    if box_spec is not None and data.has_box:
-        from zsrm.vlm import load_vlm
-
-        box_vlm = load_vlm(box_spec)
+    box_vlm = load_vlm(box_spec) if box_spec is not None and data.has_box else None
     shards = ShardFolder(folder, kind="labels", config=asdict(cfg), n_shards=data.manifest["n_shards"],
                          extra={"data": str(Path(data_folder).resolve())})
     grounder = Grounder(vlm, cfg, data, shards.manifest.get("centres"), shards.manifest.get("fine_centres"),

@@ -39,11 +39,16 @@ HOW_TO_BUILD = {"scene": "build it with `zsrm pretrain-vlm` (about 15 minutes on
                            "data/zsrm/box-8k --labels labels-sil --steps 4000`"}
 
 
-def shipped_digest(name: str) -> str:
-    """The first 12 hex digits of the SHA-256 of a shipped model's weights (which version it is)."""
+def weights_digest(folder: Path) -> str:
+    """The first 12 hex digits of the SHA-256 of a model folder's weights (which version it is)."""
     import hashlib
 
-    return hashlib.sha256((shipped_folder(name) / WEIGHTS_FILE).read_bytes()).hexdigest()[:12]
+    return hashlib.sha256((folder / WEIGHTS_FILE).read_bytes()).hexdigest()[:12]
+
+
+def shipped_digest(name: str) -> str:
+    """:func:`weights_digest` of a shipped model."""
+    return weights_digest(shipped_folder(name))
 
 
 def pinned(spec: str) -> str:
@@ -64,13 +69,8 @@ def shipped_folder(name: str) -> Path:
 def retired_folder(name: str, digest: str) -> Path | None:
     """The folder of an earlier version of a shipped model, kept beside it as
     ``retired/<name>@<digest>`` so that runs pinned to it still load it; None if not kept."""
-    import hashlib
-
     folder = SHIPPED[name].parent / "retired" / f"{name}@{digest}"
-    weights = folder / WEIGHTS_FILE
-    if weights.is_file() and hashlib.sha256(weights.read_bytes()).hexdigest()[:12] == digest:
-        return folder
-    return None
+    return folder if (folder / WEIGHTS_FILE).is_file() and weights_digest(folder) == digest else None
 
 
 def load_vlm(spec: str | Path = DEFAULT_VLM, device: str | torch.device = "cpu") -> VisionLanguageModel:
