@@ -46,6 +46,12 @@ results: setup
 	# with the student shipped before the box (kept under zsrm/fullmodel/weights/retired/), as measured
 	$(VENV)/bin/zsrm sweep --tasks push_close place_right stack --rewards oracle zsrm random --seeds 0 1 2 \
 		--reward-model student@978a53be9a61 --out results/rl/learning.json
+	# Figures 4 and 6 (baselines base, vice, curiosity and the pendulum; the learning runs above are part of it)
+	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity random \
+		--seeds 0 1 2 --reward-model student@978a53be9a61 --out results/rl/summary.json
+	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity random \
+		--seeds 0 1 2 3 4 --reward-model student@978a53be9a61 --out results/rl/summary.json --gather-only
+	$(VENV)/bin/zsrm plot --summary results/rl/summary.json --figure6 results/rl/figure6.png --figure4 results/rl/figure4.png
 	# Does the stack policy trained on the student hover instead of stacking? (results/rl/student_v1/
 	# holds the same diagnostics of the earlier student, which did, and is kept for the record)
 	$(PY) benchmarks/reward_hacking.py runs/rl/stack-zsrm-0/policy --episodes 20 --out results/rl/reward_hacking_stack.json
