@@ -10,7 +10,7 @@ import torch
 
 from zsrm.pipeline.distill import Distill, EvalMultitask, MultitaskRollouts, train_goals
 from zsrm.policy.models import DistilledPolicy, PolicyConfig, embed_goals, load_policy, resnet18, save_policy
-from zsrm.policy.rollouts import RolloutData, policy_folder, train_task_index
+from zsrm.policy.rollouts import RolloutData, keep_task_policies, policy_folder, train_task_index
 from zsrm.policy.training import random_crops
 from zsrm.rl import TrainConfig, train
 from zsrm.rl.envs import make_vec
@@ -132,6 +132,25 @@ def test_resnet18_imagenet_weights_offline_is_one_clear_line():
         pytest.skip("ResNet18's ImageNet weights are cached on this machine")
     with pytest.raises(ValueError, match="--tower scene"):
         resnet18(pretrained=True)
+
+
+def test_finished_task_policies_are_kept_and_roll_out_from_there(pipeline, tmp_path):
+    unfinished = policy_folder(pipeline / "policies", TRAIN_TASKS[1].text)
+    shutil.copytree(policy_folder(pipeline / "policies", GOALS[0]), unfinished)  # a run without summary.json
+    try:
+        kept = keep_task_policies(pipeline / "policies", tmp_path / "kept", [*GOALS, TRAIN_TASKS[1].text])
+    finally:
+        shutil.rmtree(unfinished.parent)
+    assert kept == [policy_folder(tmp_path / "kept", g) for g in GOALS]
+    for goal in GOALS:
+        src = policy_folder(pipeline / "policies", goal)
+        assert (policy_folder(tmp_path / "kept", goal) / "model.safetensors").read_bytes() == \
+            (src / "model.safetensors").read_bytes()
+    assert not policy_folder(tmp_path / "kept", TRAIN_TASKS[1].text).exists()
+    # The rollouts read the kept folder as they read the run folders.
+    assert MultitaskRollouts(tasks=(GOALS[0],), policies=str(tmp_path / "kept"), episodes=1, envs=1,
+                             out=str(tmp_path / "rollouts")).run() == 0
+    assert RolloutData(tmp_path / "rollouts").goals == [GOALS[0]]
 
 
 def test_tiny_end_to_end_writes_table2(pipeline):

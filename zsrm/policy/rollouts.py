@@ -47,6 +47,27 @@ def policy_folder(root: str | Path, goal: str, seed: int = 0) -> Path:
     return Path(root) / trial_name(goal, "zsrm", seed) / "policy"
 
 
+def keep_task_policies(root: str | Path, keep: str | Path, goals, seed: int = 0) -> list[Path]:
+    """Copy each finished task policy (its run folder holds ``summary.json``) from ``root`` to
+    ``keep`` (same layout, under 1 MB a policy): the folder a results directory keeps under
+    version control, so the rollouts need not retrain what a finished sweep skips. Returns the
+    kept policies of ``goals``, copied now or before."""
+    import shutil
+
+    from zsrm.vlm.files import atomic_path
+
+    kept = []
+    for goal in goals:
+        src, dest = policy_folder(root, goal, seed), policy_folder(keep, goal, seed)
+        if (src.parent / "summary.json").is_file() and (src / "config.json").is_file():
+            for f in sorted(p for p in src.iterdir() if p.is_file()):
+                with atomic_path(dest / f.name) as tmp:
+                    shutil.copyfile(f, tmp)
+        if (dest / "config.json").is_file():
+            kept.append(dest)
+    return kept
+
+
 @dataclass
 class RolloutConfig:
     """Which rollouts to collect (saved in the manifest: a folder resumes only with the same)."""
