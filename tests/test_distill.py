@@ -14,6 +14,7 @@ from zsrm.policy.rollouts import RolloutData, keep_task_policies, policy_folder,
 from zsrm.policy.training import random_crops
 from zsrm.rl import TrainConfig, train
 from zsrm.rl.envs import make_vec
+from zsrm.rl.sweep import trial_grid
 from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
 from zsrm.tasks.language import parse_goal
 from zsrm.testing import hostile as H
@@ -137,8 +138,11 @@ def test_resnet18_imagenet_weights_offline_is_one_clear_line():
 def test_finished_task_policies_are_kept_and_roll_out_from_there(pipeline, tmp_path):
     unfinished = policy_folder(pipeline / "policies", TRAIN_TASKS[1].text)
     shutil.copytree(policy_folder(pipeline / "policies", GOALS[0]), unfinished)  # a run without summary.json
+    trials = trial_grid([*GOALS, TRAIN_TASKS[1].text], ["zsrm"], [0], TINY)
+    stale = trial_grid(GOALS, ["zsrm"], [0], {**TINY, "steps": 512})  # finished, but with other settings
     try:
-        kept = keep_task_policies(pipeline / "policies", tmp_path / "kept", [*GOALS, TRAIN_TASKS[1].text])
+        assert keep_task_policies(pipeline / "policies", tmp_path / "stale", stale) == []
+        kept = keep_task_policies(pipeline / "policies", tmp_path / "kept", trials)
     finally:
         shutil.rmtree(unfinished.parent)
     assert kept == [policy_folder(tmp_path / "kept", g) for g in GOALS]
@@ -147,6 +151,9 @@ def test_finished_task_policies_are_kept_and_roll_out_from_there(pipeline, tmp_p
         assert (policy_folder(tmp_path / "kept", goal) / "model.safetensors").read_bytes() == \
             (src / "model.safetensors").read_bytes()
     assert not policy_folder(tmp_path / "kept", TRAIN_TASKS[1].text).exists()
+    assert not (tmp_path / "stale").exists()
+    # Kept policies stay kept (and are not copied again) once their run folders are gone.
+    assert keep_task_policies(tmp_path / "gone", tmp_path / "kept", trials) == kept
     # The rollouts read the kept folder as they read the run folders.
     assert MultitaskRollouts(tasks=(GOALS[0],), policies=str(tmp_path / "kept"), episodes=1, envs=1,
                              out=str(tmp_path / "rollouts")).run() == 0

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import platform
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from zsrm.pipeline import narrow
 from zsrm.pipeline.learn import Sweep
@@ -44,18 +45,19 @@ class MultitaskPolicies:
     reward_model: str = "student"  # the zsrm reward's model folder, or student (the shipped one)
     out: str = "results/multitask/policies.json"  # the gathered summary (trials kept beside it in trials/)
     vlm: str = "scene"  # the VLM whose image trunk the policies read
-    keep: str = KEPT_POLICIES  # each finished policy copied here (for zsrm multitask-rollouts)
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
     def run(self) -> int:
         from zsrm.policy.rollouts import keep_task_policies
 
-        goals = train_goals(self.tasks)
-        status = Sweep(tasks=tuple(goals), rewards=("zsrm",), seeds=(self.seed,), root=self.root,
-                       steps=self.steps, num_cpus=self.num_cpus, address=self.address, vlm=self.vlm,
-                       reward_model=self.reward_model, out=self.out, train=self.train).run()
-        kept = keep_task_policies(self.root, self.keep, goals, self.seed)
-        print(f"{len(kept)} of {len(goals)} task policies kept in {self.keep}/")
+        sweep = Sweep(tasks=tuple(train_goals(self.tasks)), rewards=("zsrm",), seeds=(self.seed,), root=self.root,
+                      steps=self.steps, num_cpus=self.num_cpus, address=self.address, vlm=self.vlm,
+                      reward_model=self.reward_model, out=self.out, train=self.train)
+        status = sweep.run()
+        # Beside the kept trial summaries, as the sweep keeps them: the rollouts need the weights.
+        keep = Path(self.out).parent / "task_policies"
+        kept = keep_task_policies(self.root, keep, sweep.trials())
+        print(f"{len(kept)} of {len(sweep.tasks)} task policies kept in {keep}/")
         return status
 
 
@@ -64,7 +66,7 @@ class MultitaskRollouts:
     """Roll out each training task's policy (seeded episodes, goal text kept): the distillation data."""
 
     tasks: tuple[str, ...] = ()  # training tasks (goal sentences); default: all 18
-    policies: str = KEPT_POLICIES  # the task policies kept by zsrm multitask-policies
+    policies: str = KEPT_POLICIES  # the task policies kept by zsrm multitask-policies (beside its --out)
     seed: int = 0  # the task policies' seed (their folder names)
     episodes: int = 50  # episodes of 100 control steps per task
     envs: int = 10  # episodes stepped together

@@ -101,22 +101,19 @@ class Sweep:
 
     def run(self) -> int:
         from zsrm.evaluation.learning_curves import plot_learning_curves
-        from zsrm.rl.sweep import gather, keep_trial_summaries, sweep, trial_grid
+        from zsrm.rl.sweep import gather, keep_trial_summaries, sweep
 
         unknown = set(self.rewards) - set(REWARDS)
         if unknown:
             raise ValueError(f"unknown rewards {', '.join(sorted(unknown))}; choose from {', '.join(REWARDS)}")
         check_writable(self.root, folder=True)
         check_writable(self.out)
-        # A model folder by its absolute path: Ray Tune runs each trial in its own working directory.
-        overrides = {**self.train, "steps": self.steps, "reward_model": absolute_if_folder(self.reward_model),
-                     "vlm": absolute_if_folder(self.vlm)}
         out = Path(self.out)
         if not self.gather_only:
-            ran = sweep(self.root, self.tasks, self.rewards, self.seeds, overrides, num_cpus=self.num_cpus,
+            ran = sweep(self.root, self.tasks, self.rewards, self.seeds, self.overrides(), num_cpus=self.num_cpus,
                         address=self.address, kept=out.parent / "trials")
             print(f"ran {len(ran)} trial(s); the others were finished already")
-        trials = trial_grid(self.tasks, self.rewards, self.seeds, overrides)
+        trials = self.trials()
         kept = keep_trial_summaries(self.root, out.parent / "trials", trials)
         if not kept:
             print("no finished trials yet")
@@ -129,6 +126,18 @@ class Sweep:
                                           for r, v in rewards.items()))
         print(f"wrote {out} and {out.with_suffix('.png')}")
         return 0
+
+    def overrides(self) -> dict:
+        """The TrainConfig settings every trial shares."""
+        # A model folder by its absolute path: Ray Tune runs each trial in its own working directory.
+        return {**self.train, "steps": self.steps, "reward_model": absolute_if_folder(self.reward_model),
+                "vlm": absolute_if_folder(self.vlm)}
+
+    def trials(self) -> list[dict]:
+        """The sweep's trials: name and TrainConfig (as a dict) of each."""
+        from zsrm.rl.sweep import trial_grid
+
+        return trial_grid(self.tasks, self.rewards, self.seeds, self.overrides())
 
     def meta(self, finished: int, planned: int) -> dict:
         return {"trials_finished": finished, "trials_planned": planned,

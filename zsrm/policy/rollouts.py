@@ -14,6 +14,7 @@ mean is the ceiling of Table 2 (``oracle_task_policies``).
 """
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -47,23 +48,30 @@ def policy_folder(root: str | Path, goal: str, seed: int = 0) -> Path:
     return Path(root) / trial_name(goal, "zsrm", seed) / "policy"
 
 
-def keep_task_policies(root: str | Path, keep: str | Path, goals, seed: int = 0) -> list[Path]:
-    """Copy each finished task policy (its run folder holds ``summary.json``) from ``root`` to
-    ``keep`` (same layout, under 1 MB a policy): the folder a results directory keeps under
-    version control, so the rollouts need not retrain what a finished sweep skips. Returns the
-    kept policies of ``goals``, copied now or before."""
+def keep_task_policies(root: str | Path, keep: str | Path, trials) -> list[Path]:
+    """Copy the policy of each of a zsrm sweep's ``trials`` (name and config) that finished with
+    the trial's settings from ``root`` to ``keep`` (same layout, under 1 MB a policy): the folder
+    a results directory keeps under version control, so the rollouts need not retrain what a
+    finished sweep skips. Returns the policies of ``trials`` kept there, copied now or before."""
     import shutil
 
+    from zsrm.rl.sweep import is_finished
     from zsrm.vlm.files import atomic_path
 
+    def kept_config(folder: Path) -> dict | None:
+        try:
+            return json.loads((folder / "config.json").read_text()).get("config")
+        except (OSError, json.JSONDecodeError):
+            return None
+
     kept = []
-    for goal in goals:
-        src, dest = policy_folder(root, goal, seed), policy_folder(keep, goal, seed)
-        if (src.parent / "summary.json").is_file() and (src / "config.json").is_file():
+    for trial in trials:
+        src, dest = Path(root) / trial["name"] / "policy", Path(keep) / trial["name"] / "policy"
+        if kept_config(dest) != trial["config"] and is_finished(src.parent, trial["config"]):
             for f in sorted(p for p in src.iterdir() if p.is_file()):
                 with atomic_path(dest / f.name) as tmp:
                     shutil.copyfile(f, tmp)
-        if (dest / "config.json").is_file():
+        if kept_config(dest) == trial["config"]:
             kept.append(dest)
     return kept
 
