@@ -19,7 +19,15 @@ from zsrm.tasks.catalogue import TRAIN_TASKS
 from zsrm.vlm.files import check_writable
 
 POLICIES_ROOT = "runs/multitask/policies"
-KEPT_POLICIES = "results/multitask/task_policies"  # the finished task policies, kept under version control
+POLICIES_SUMMARY = "results/multitask/policies.json"
+
+
+def kept_policies(summary: str | Path) -> Path:
+    """Where ``zsrm multitask-policies --out summary`` keeps the finished policies (under version control)."""
+    return Path(summary).parent / "task_policies"
+
+
+KEPT_POLICIES = str(kept_policies(POLICIES_SUMMARY))
 ROLLOUTS = "data/multitask/rollouts"
 DISTILLED = "runs/multitask/distill"
 
@@ -43,7 +51,7 @@ class MultitaskPolicies:
     num_cpus: int = 2  # CPUs of the local Ray (one trial per CPU)
     address: str | None = None  # a Ray cluster to join instead (auto, or ray://HOST:PORT)
     reward_model: str = "student"  # the zsrm reward's model folder, or student (the shipped one)
-    out: str = "results/multitask/policies.json"  # the gathered summary (trials kept beside it in trials/)
+    out: str = POLICIES_SUMMARY  # the gathered summary (trials kept beside it in trials/)
     vlm: str = "scene"  # the VLM whose image trunk the policies read
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
@@ -55,7 +63,7 @@ class MultitaskPolicies:
                       reward_model=self.reward_model, out=self.out, train=self.train)
         status = sweep.run()
         # Beside the kept trial summaries, as the sweep keeps them: the rollouts need the weights.
-        keep = Path(self.out).parent / "task_policies"
+        keep = kept_policies(self.out)
         kept = keep_task_policies(self.root, keep, sweep.trials())
         print(f"{len(kept)} of {len(sweep.tasks)} task policies kept in {keep}/")
         return status
@@ -66,7 +74,7 @@ class MultitaskRollouts:
     """Roll out each training task's policy (seeded episodes, goal text kept): the distillation data."""
 
     tasks: tuple[str, ...] = ()  # training tasks (goal sentences); default: all 18
-    policies: str = KEPT_POLICIES  # the task policies kept by zsrm multitask-policies (beside its --out)
+    policies: str = KEPT_POLICIES  # the task policies kept by zsrm multitask-policies (at its default --out)
     seed: int = 0  # the task policies' seed (their folder names)
     episodes: int = 50  # episodes of 100 control steps per task
     envs: int = 10  # episodes stepped together

@@ -14,7 +14,6 @@ mean is the ceiling of Table 2 (``oracle_task_policies``).
 """
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -58,21 +57,17 @@ def keep_task_policies(root: str | Path, keep: str | Path, trials) -> list[Path]
     from zsrm.rl.sweep import is_finished
     from zsrm.vlm.files import atomic_path
 
-    def kept_config(folder: Path) -> dict | None:
-        try:
-            return json.loads((folder / "config.json").read_text()).get("config")
-        except (OSError, json.JSONDecodeError):
-            return None
-
     kept = []
     for trial in trials:
         src, dest = Path(root) / trial["name"] / "policy", Path(keep) / trial["name"] / "policy"
-        if kept_config(dest) != trial["config"] and is_finished(src.parent, trial["config"]):
-            for f in sorted(p for p in src.iterdir() if p.is_file()):
+        if not is_finished(dest / "config.json", trial["config"]):
+            if not is_finished(src.parent, trial["config"]):
+                continue
+            # config.json last: it marks a complete copy for the check above
+            for f in sorted((p for p in src.iterdir() if p.is_file()), key=lambda p: p.name == "config.json"):
                 with atomic_path(dest / f.name) as tmp:
                     shutil.copyfile(f, tmp)
-        if kept_config(dest) == trial["config"]:
-            kept.append(dest)
+        kept.append(dest)
     return kept
 
 
