@@ -11,13 +11,14 @@ import torch
 from zsrm.pipeline.distill import Distill, EvalMultitask, MultitaskRollouts, train_goals
 from zsrm.policy.models import DistilledPolicy, PolicyConfig, embed_goals, load_policy, resnet18, save_policy
 from zsrm.policy.rollouts import RolloutData, keep_task_policies, policy_folder, train_task_index
-from zsrm.policy.training import random_crops
+from zsrm.policy.training import load_distilled, random_crops
 from zsrm.rl import TrainConfig, train
 from zsrm.rl.envs import make_vec
 from zsrm.rl.sweep import trial_grid
 from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
 from zsrm.tasks.language import parse_goal
 from zsrm.testing import hostile as H
+from zsrm.vlm import load_vlm
 from zsrm.vlm.files import ZsrmFileError
 from zsrm.vlm.scene import SceneConfig
 
@@ -185,6 +186,41 @@ def test_tiny_end_to_end_writes_table2(pipeline):
     mtime = weights.stat().st_mtime_ns
     assert Distill(epochs=1, threads=1, data=str(pipeline / "rollouts"), out=str(pipeline / "distill")).run() == 0
     assert weights.stat().st_mtime_ns == mtime
+
+
+def test_eval_multitask_reuses_finished_cells_and_rescores_changed_ones(pipeline, tmp_path, monkeypatch):
+    import zsrm.evaluation.multitask as M
+
+    first = json.loads((pipeline / "table2.json").read_text())
+    csv_rows = (pipeline / "table2.csv").read_text().splitlines()
+    assert csv_rows[0] == "policy,spread,split,mean,se,episodes" and len(csv_rows) == 1 + 3 * 2 * 2
+    assert len(list((pipeline / "distill" / "eval").glob("*.json"))) == 3 * 2 * 2
+
+    def scored(policy, goal, embedding, seeds, spread, task_seed):
+        calls.append((goal, spread))
+        return [7.0] * seeds
+
+    monkeypatch.setattr(M, "task_rewards", scored)
+    calls = []
+    out = tmp_path / "again.json"
+    assert EvalMultitask(policies=str(pipeline / "distill"), data=str(pipeline / "rollouts"), seeds=2, tasks=2,
+                         threads=1, out=str(out)).run() == 0
+    again = json.loads(out.read_text())
+    assert calls == [] and {k: again[k] for k in ("language", "primitive", "none")} == \
+        {k: first[k] for k in ("language", "primitive", "none")}
+    # Other weights (or other seeds) are scored again, and only that policy.
+    _, policies = load_distilled(pipeline / "distill")
+    with torch.no_grad():
+        next(policies["none"].parameters()).add_(1.0)
+    cache = tmp_path / "cells"
+    shutil.copytree(pipeline / "distill" / "eval", cache)
+    table = M.evaluate_policies(policies, load_vlm("scene"), M.split_goals(2), 2, progress=False, cache=cache)
+    assert len(calls) == 2 * 2 * 2 and table["none"]["seen"]["test"]["mean"] == 7.0
+    assert table["language"] == first["language"]
+    calls.clear()
+    M.evaluate_policies({"language": policies["language"]}, load_vlm("scene"), M.split_goals(2), 3,
+                        progress=False, cache=cache)
+    assert len(calls) == 2 * 2 * 2
 
 
 def test_docstring_examples():

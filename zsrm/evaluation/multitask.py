@@ -46,22 +46,49 @@ def task_rewards(policy: DistilledPolicy, goal: str, embedding: torch.Tensor, se
         venv.close()
 
 
+def weights_key(policy: DistilledPolicy) -> str:
+    """The first 12 hex digits of the SHA-256 of a policy's weights (which one a cached cell scored)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for name, tensor in policy.state_dict().items():
+        digest.update(name.encode())
+        digest.update(tensor.detach().cpu().contiguous().numpy().tobytes())
+    return digest.hexdigest()[:12]
+
+
 def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[str, list[str]], seeds: int,
-                      spreads=SPREADS, progress: bool = True) -> dict:
-    """``<policy>.<spread>.<split>.{mean, se, episodes}`` and the per-task means."""
+                      spreads=SPREADS, progress: bool = True, cache: str | Path | None = None) -> dict:
+    """``<policy>.<spread>.<split>.{mean, se, episodes}`` and the per-task means. With ``cache``,
+    each (policy, spread, split) cell is saved there as it finishes and reused while the policy's
+    weights, the goals and the seeds are the same: a killed evaluation resumes at the first
+    unfinished cell, and policies distilled at different times are scored as they come."""
     from tqdm import tqdm
 
+    from zsrm.vlm.files import ZsrmFileError, read_json
+
     out: dict = {}
+    keys = {name: weights_key(policy) for name, policy in policies.items()}
     runs = [(n, s, sp) for n in policies for s in spreads for sp in splits]
     for name, spread, split in tqdm(runs, desc="eval-multitask", disable=not progress):
         policy, goals = policies[name], splits[split]
-        embeddings = embed_goals(vlm, goals, policy.cfg.text_embedding)
-        per_task = [task_rewards(policy, goal, embeddings[i:i + 1], seeds, spread, EVAL_SEED + 1000 * i)
-                    for i, goal in enumerate(goals)]
-        mean, se = mean_se([r for rewards in per_task for r in rewards])
-        out.setdefault(name, {}).setdefault(spread, {})[split] = {
-            "mean": mean, "se": se, "episodes": sum(map(len, per_task)),
-            "per_task": {goal: float(np.mean(r)) for goal, r in zip(goals, per_task)}}
+        key = {"weights": keys[name], "goals": goals, "seeds": seeds, "spread": spread, "eval_seed": EVAL_SEED}
+        path = Path(cache) / f"{name}-{spread}-{split}.json" if cache else None
+        try:
+            cell = read_json(path) if path else {}
+        except (FileNotFoundError, ZsrmFileError):
+            cell = {}
+        if cell.get("key") != key:
+            embeddings = embed_goals(vlm, goals, policy.cfg.text_embedding)
+            per_task = [task_rewards(policy, goal, embeddings[i:i + 1], seeds, spread, EVAL_SEED + 1000 * i)
+                        for i, goal in enumerate(goals)]
+            mean, se = mean_se([r for rewards in per_task for r in rewards])
+            cell = {"key": key, "result": {
+                "mean": mean, "se": se, "episodes": sum(map(len, per_task)),
+                "per_task": {goal: float(np.mean(r)) for goal, r in zip(goals, per_task)}}}
+            if path:
+                write_json(path, cell)
+        out.setdefault(name, {}).setdefault(spread, {})[split] = cell["result"]
     return out
 
 
@@ -117,8 +144,17 @@ def plot_table(table: dict, path: str | Path) -> Path:
     return save_figure(fig, path)
 
 
+def table_rows(table: dict) -> list[dict]:
+    """Table 2 as rows (one per policy, spread and split) for the CSV."""
+    return [{"policy": name, "spread": spread, "split": split, "mean": table[name][spread][split]["mean"],
+             "se": table[name][spread][split]["se"], "episodes": table[name][spread][split]["episodes"]}
+            for name in ("none", "primitive", "language") if name in table for spread in SPREADS for split in SPLITS]
+
+
 def write_table(table: dict, path: str | Path) -> list[Path]:
-    """``path`` (JSON), the markdown and the plot beside it (``.md``, ``.png``)."""
+    """``path`` (JSON), the CSV, markdown and plot beside it (``.csv``, ``.md``, ``.png``)."""
+    from zsrm.evaluation.curves import write_csv
+
     path = Path(path)
-    return [write_json(path, table), write_text(path.with_suffix(".md"), table_markdown(table)),
-            plot_table(table, path.with_suffix(".png"))]
+    return [write_json(path, table), write_csv(table_rows(table), path.with_suffix(".csv")),
+            write_text(path.with_suffix(".md"), table_markdown(table)), plot_table(table, path.with_suffix(".png"))]

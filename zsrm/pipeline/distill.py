@@ -128,8 +128,11 @@ class EvalMultitask:
     tasks: int | None = None  # only the first N training and N test tasks (default: all 18 and 18)
     out: str = "results/table2.json"  # the table; .md and .png beside it
     threads: int = 2  # torch threads
+    fresh: bool = False  # score every cell again instead of reusing those saved under POLICIES/eval/
 
     def run(self) -> int:
+        import shutil
+
         import torch
 
         from zsrm.evaluation.multitask import evaluate_policies, primitive_mapping, split_goals, write_table
@@ -143,7 +146,10 @@ class EvalMultitask:
         summary, policies = load_distilled(self.policies)
         data, vlm = RolloutData(self.data), load_vlm(summary["vlm"])
         splits = split_goals(self.tasks)
-        table = evaluate_policies(policies, vlm, splits, self.seeds)
+        cache = Path(self.policies) / "eval"
+        if self.fresh:
+            shutil.rmtree(cache, ignore_errors=True)
+        table = evaluate_policies(policies, vlm, splits, self.seeds, cache=cache)
         mean, se = mean_se(data.episode_rewards)
         table.update(schedule=summary["schedule"], tower=summary["tower"],
                      oracle_task_policies={"mean": mean, "se": se, "episodes": len(data.episode_rewards),
