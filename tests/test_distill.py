@@ -159,6 +159,12 @@ def test_finished_task_policies_are_kept_and_roll_out_from_there(pipeline, tmp_p
     assert MultitaskRollouts(tasks=(GOALS[0],), policies=str(tmp_path / "kept"), episodes=1, envs=1,
                              out=str(tmp_path / "rollouts")).run() == 0
     assert RolloutData(tmp_path / "rollouts").goals == [GOALS[0]]
+    # The same command gives the same data (the policies sample their actions from a seeded generator).
+    torch.manual_seed(123)
+    assert MultitaskRollouts(tasks=(GOALS[0],), policies=str(tmp_path / "kept"), episodes=1, envs=1,
+                             out=str(tmp_path / "again")).run() == 0
+    first, again = RolloutData(tmp_path / "rollouts").load(), RolloutData(tmp_path / "again").load()
+    assert all(np.array_equal(first[k], again[k]) for k in ("frames", "actions", "task"))
 
 
 def test_tiny_end_to_end_writes_table2(pipeline):

@@ -125,6 +125,8 @@ class DecisionRecorder(VecEnvWrapper):
 def collect_task(policy: str | Path, goal: str, episodes: int, envs: int) -> tuple[dict, dict]:
     """The decisions of ``episodes`` seeded episodes of one task policy, as shard arrays, and
     the shard's manifest entry (the oracle episode rewards, the camera, the action repeat)."""
+    import torch
+
     from zsrm.rl.envs import goal_camera, make_vec
     from zsrm.rl.features import VecImageFeatures
     from zsrm.rl.policy import PolicyBundle
@@ -139,8 +141,9 @@ def collect_task(policy: str | Path, goal: str, episodes: int, envs: int) -> tup
                          "comes from zsrm-trained policies")
     vlm, rewards, parts = load_vlm(bundle.cfg.vlm), [], []
     for start in range(0, episodes, envs):
-        n = min(envs, episodes - start)
-        venv = DecisionRecorder(VecImageFeatures(make_vec(bundle.cfg, n, COLLECT_SEED + 1000 * index + start),
+        n, seed = min(envs, episodes - start), COLLECT_SEED + 1000 * index + start
+        torch.manual_seed(seed)  # the policy samples its actions: same seed, same data
+        venv = DecisionRecorder(VecImageFeatures(make_vec(bundle.cfg, n, seed),
                                                  vlm, goal_camera(goal)))
         try:
             result = run_vec_episodes(venv, lambda obs: bundle.act(obs, deterministic=bundle.cfg.eval_deterministic))
