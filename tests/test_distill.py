@@ -258,3 +258,20 @@ def test_a_damaged_distilled_policy_is_one_line_naming_the_file(pipeline, damage
     assert "\n" not in message.strip()
     assert str(config if damage.startswith("config") else weights) in message
     assert not marker.exists()
+
+
+def test_blue_sensitivity_benchmark_measures_each_moved_block(pipeline, tmp_path, monkeypatch):
+    import runpy
+    import sys
+
+    out = tmp_path / "blue.json"
+    script = Path(__file__).parent.parent / "benchmarks" / "distill_blue_sensitivity.py"
+    monkeypatch.setattr(sys, "argv", [str(script), "--policies", str(pipeline / "distill"), "--scenes", "1",
+                                      "--out", str(out)])
+    runpy.run_path(str(script), run_name="__main__")
+    result = json.loads(out.read_text())
+    for policy in ("language", "primitive", "none"):
+        for moved in ("blue", "test_other", "train"):
+            cell = result[policy][moved]
+            # A block that moves a block width moves the frame, so the keypoints move.
+            assert cell["keypoint_shift"]["mean"] > 0 and cell["action_change"]["mean"] >= 0
