@@ -18,13 +18,12 @@ import numpy as np
 import torch
 
 from zsrm.envs.tabletop import BLOCK_HALF
-from zsrm.evaluation.multitask import EVAL_SEED
+from zsrm.evaluation.multitask import EVAL_SEED, split_goals
 from zsrm.policy.models import embed_goals
 from zsrm.policy.training import load_distilled
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.envs import make_vec
 from zsrm.rl.evaluate import mean_se
-from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
 from zsrm.tasks.language import parse_goal
 from zsrm.vlm import load_vlm
 from zsrm.vlm.files import write_json
@@ -58,18 +57,19 @@ def main() -> None:
     args = parser.parse_args()
 
     summary, policies = load_distilled(args.policies)
-    vlm = load_vlm(summary.get("vlm", "scene"))
+    vlm = load_vlm(summary["vlm"])
     rng = np.random.default_rng(0)
     # Per policy and moved block (blue; a training colour in a test scene; in a training scene):
     # keypoint shifts and action changes.
     moved = ("blue", "test_other", "train")
     shifts = {name: {key: ([], []) for key in moved} for name in policies}
-    splits = {split: [t.text for t in tasks if parse_goal(t.text).relation in ("left_of", "right_of")]
-              for split, tasks in (("test", TEST_TASKS), ("train", TRAIN_TASKS))}
+    every = split_goals()
+    splits = {split: [g for g in every[split] if parse_goal(g).relation in ("left_of", "right_of")]
+              for split in ("test", "train")}
     for split, goals in splits.items():
         for goal in goals:
-            embedding = embed_goals(vlm, [goal], summary.get("text_embedding", "language"))
             for name, policy in policies.items():
+                embedding = embed_goals(vlm, [goal], policy.cfg.text_embedding)
                 venv = make_vec(TrainConfig(goal=goal, image_size=policy.cfg.image_size,
                                             action_repeat=policy.cfg.action_repeat), args.scenes, EVAL_SEED)
                 venv.reset()
