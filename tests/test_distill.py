@@ -1,5 +1,6 @@
 """The multi-task policy (paper 2.3, 3.3, Table 2): rollout data without blue, the nearest
-primitive code, the three policies, and a tiny end to end run of the four commands."""
+primitive code, the three policies and the grounded variant, and a tiny end to end run of the
+four commands."""
 import json
 import shutil
 from pathlib import Path
@@ -27,6 +28,7 @@ TINY = dict(steps=256, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_epi
 # One stack and one place-right task (TRAIN_TASKS order: on top of, left of, right of x 6 pairs).
 GOALS = [TRAIN_TASKS[0].text, TRAIN_TASKS[12].text]
 SMALL_SCENE = SceneConfig(widths=(8, 8, 8), groups=4)
+POLICIES = ("language", "primitive", "none", "grounded")
 
 
 def blue_pixels(frames: np.ndarray) -> np.ndarray:
@@ -46,7 +48,8 @@ def pipeline(tmp_path_factory):
               progress=False)
     assert MultitaskRollouts(tasks=tuple(GOALS), policies=str(root / "policies"), episodes=2, envs=2,
                              out=str(root / "rollouts")).run() == 0
-    assert Distill(epochs=1, threads=1, data=str(root / "rollouts"), out=str(root / "distill")).run() == 0
+    assert Distill(epochs=1, threads=1, policies=POLICIES, data=str(root / "rollouts"),
+                   out=str(root / "distill")).run() == 0
     assert EvalMultitask(policies=str(root / "distill"), data=str(root / "rollouts"), seeds=2, tasks=2,
                          threads=1, out=str(root / "table2.json")).run() == 0
     return root
@@ -122,6 +125,81 @@ def test_the_three_policies_give_one_action_per_frame(tmp_path, tower, condition
     assert json.loads((tmp_path / "config.json").read_text())["config"]["conditioning"] == conditioning
 
 
+@pytest.mark.parametrize("view", ["colour", "grey", "none"])
+def test_the_grounded_policy_gives_one_action_per_frame_and_keeps_the_vlm_frozen(tmp_path, view):
+    vlm = load_vlm("scene")
+    goals = ("a red block on top of a green block", "a green block on the left of a red block")
+    embeddings = embed_goals(vlm, goals, "grounded")
+    cfg = PolicyConfig(conditioning="grounded", tower="scene", image_size=64, action_dim=3,
+                       text_dim=embeddings.shape[1], goals=goals, scene=vlm.config, hidden=16, keypoints=4,
+                       text_embedding="grounded", keypoint_view=view)
+    policy = DistilledPolicy(cfg)
+    policy.load_scene_vlm(vlm)
+    trainable = {n for n, p in policy.named_parameters() if p.requires_grad}
+    assert trainable and not any(n.startswith(("encoder.net.0.", "grounding_proj.")) for n in trainable)
+    assert torch.equal(policy.grounding_proj.weight, vlm.visual.proj.weight)
+    frames = np.random.default_rng(0).integers(0, 255, (5, 64, 64, 3), dtype=np.uint8)
+    actions = policy.eval().act(frames, embeddings[[0, 1, 0, 1, 0]])
+    assert tuple(actions.shape) == (5, 3) and actions.abs().max() <= 1
+    # Training reaches the fc layers and the keypoint head, never the VLM's trunk or head.
+    before = policy.encoder.net[0].state_dict()["0.0.weight"].clone()
+    loss = policy.train()(torch.as_tensor(frames).permute(0, 3, 1, 2), embeddings[[0, 1, 0, 1, 0]]).square().sum()
+    loss.backward()
+    assert policy.encoder.net[0][0][0].weight.grad is None and policy.head[0].weight.grad is not None
+    # The keypoint head learns unless the policy has no keypoints of its own.
+    assert (policy.encoder.net[1][0].weight.grad is None) == (view == "none")
+    assert torch.equal(policy.encoder.net[0].state_dict()["0.0.weight"], before)
+    save_policy(policy.eval(), tmp_path)
+    assert torch.equal(load_policy(tmp_path).act(frames, embeddings[[0, 1, 0, 1, 0]]), actions)
+    with pytest.raises(ValueError, match="grounded"):
+        PolicyConfig(conditioning="grounded", tower="resnet18", image_size=64, action_dim=3, text_dim=8,
+                     goals=goals, text_embedding="grounded")
+    with pytest.raises(ValueError, match="only the grounded"):
+        PolicyConfig(conditioning="language", tower="scene", image_size=64, action_dim=3, text_dim=8,
+                     goals=goals, keypoint_view=view if view != "colour" else "grey")
+
+
+def test_grounded_goal_embeddings_contrast_the_goals_own_two_objects():
+    vlm = load_vlm("scene")
+    e = vlm.config.embed_dim
+    red_on_blue, blue_on_red, red_left_of_blue = embed_goals(
+        vlm, ["a red block on top of a blue block", "a blue block on top of a red block",
+              "a red block on the left of a blue block"], "grounded")
+    assert red_on_blue.shape == (2 * e + vlm.config.text_dim,)
+    # Each object's target is its phrase minus the other's: swapping the objects swaps (and
+    # negates) them; the relation's words are the same.
+    assert torch.allclose(red_on_blue[:e], -red_on_blue[e:2 * e])
+    assert torch.allclose(red_on_blue[:e], blue_on_red[e:2 * e]) and torch.equal(red_on_blue[2 * e:], blue_on_red[2 * e:])
+    # Another relation changes only the relation's words.
+    assert torch.equal(red_on_blue[:2 * e], red_left_of_blue[:2 * e])
+    assert not torch.allclose(red_on_blue[2 * e:], red_left_of_blue[2 * e:])
+    with pytest.raises(ValueError, match="2 objects"):
+        embed_goals(vlm, ["a red block between a green block and a yellow block"], "grounded")
+
+
+def test_grounded_features_find_a_colour_never_distilled_on():
+    """The grounded policy's Grad-CAM centroids, on rendered test-task scenes, land on the blue
+    block as on the training colours (the blue block's pixels give where it is)."""
+    from zsrm.grounding.gradcam import head_gradcam
+    from zsrm.policy.models import map_centroids
+
+    vlm = load_vlm("scene")
+    e = vlm.config.embed_dim
+    goal = "a blue block on the left of a red block"
+    venv = make_vec(TrainConfig(goal=goal, image_size=64), 4, 7, "seen")
+    frames = venv.reset()["front"]
+    venv.close()
+    target = embed_goals(vlm, [goal], "grounded")[:, :2 * e].view(1, 2, e).expand(len(frames), 2, e)
+    with torch.no_grad():
+        feats = vlm.image_trunk(vlm.preprocess(frames))
+    maps, scores = head_gradcam(vlm.image_head, feats, target)
+    centroid = (map_centroids(maps)[:, 0].numpy() + 1) / 2 * 63  # the blue block's, in pixels
+    for i, frame in enumerate(frames):
+        ys, xs = np.nonzero(blue_pixels(frame[None])[0])
+        assert abs(centroid[i, 0] - xs.mean()) < 4 and abs(centroid[i, 1] - ys.mean()) < 4
+    assert (scores[:, 0] > 0).all()
+
+
 def test_random_crops_keep_the_size():
     images = torch.randint(0, 255, (4, 3, 64, 64), dtype=torch.uint8)
     out = random_crops(images, torch.Generator().manual_seed(0))
@@ -169,7 +247,7 @@ def test_finished_task_policies_are_kept_and_roll_out_from_there(pipeline, tmp_p
 
 def test_tiny_end_to_end_writes_table2(pipeline):
     table = json.loads((pipeline / "table2.json").read_text())
-    for policy in ("language", "primitive", "none"):
+    for policy in POLICIES:
         for spread in ("seen", "unseen"):
             for split in ("train", "test"):
                 cell = table[policy][spread][split]
@@ -179,6 +257,7 @@ def test_tiny_end_to_end_writes_table2(pipeline):
     assert set(table["meta"]["primitive_mapping_test"].values()) <= set(GOALS)
     md = (pipeline / "table2.md").read_text()
     assert "Language Cond." in md and "Primitive Code Cond." in md and "No Conditioning" in md
+    assert "Grounded Language Cond. (zsrm)" in md
     assert (pipeline / "table2.png").read_bytes()[:4] == b"\x89PNG"
     summary = json.loads((pipeline / "distill" / "distill.json").read_text())
     assert summary["epochs"] == 1 and summary["goals"] == GOALS
@@ -190,7 +269,8 @@ def test_tiny_end_to_end_writes_table2(pipeline):
     assert shard.stat().st_mtime_ns == shard_mtime
     weights = pipeline / "distill" / "language" / "model.safetensors"
     mtime = weights.stat().st_mtime_ns
-    assert Distill(epochs=1, threads=1, data=str(pipeline / "rollouts"), out=str(pipeline / "distill")).run() == 0
+    assert Distill(epochs=1, threads=1, policies=POLICIES, data=str(pipeline / "rollouts"),
+                   out=str(pipeline / "distill")).run() == 0
     assert weights.stat().st_mtime_ns == mtime
 
 
@@ -199,8 +279,8 @@ def test_eval_multitask_reuses_finished_cells_and_rescores_changed_ones(pipeline
 
     first = json.loads((pipeline / "table2.json").read_text())
     csv_rows = (pipeline / "table2.csv").read_text().splitlines()
-    assert csv_rows[0] == "policy,spread,split,mean,se,episodes" and len(csv_rows) == 1 + 3 * 2 * 2
-    assert len(list((pipeline / "distill" / "eval").glob("*.json"))) == 3 * 2 * 2
+    assert csv_rows[0] == "policy,spread,split,mean,se,episodes" and len(csv_rows) == 1 + 4 * 2 * 2
+    assert len(list((pipeline / "distill" / "eval").glob("*.json"))) == 4 * 2 * 2
 
     def scored(policy, goal, embedding, seeds, spread, task_seed):
         calls.append((goal, spread))
@@ -212,8 +292,7 @@ def test_eval_multitask_reuses_finished_cells_and_rescores_changed_ones(pipeline
     assert EvalMultitask(policies=str(pipeline / "distill"), data=str(pipeline / "rollouts"), seeds=2, tasks=2,
                          threads=1, out=str(out)).run() == 0
     again = json.loads(out.read_text())
-    assert calls == [] and {k: again[k] for k in ("language", "primitive", "none")} == \
-        {k: first[k] for k in ("language", "primitive", "none")}
+    assert calls == [] and {k: again[k] for k in POLICIES} == {k: first[k] for k in POLICIES}
     # Other weights (or other seeds) are scored again, and only that policy.
     _, policies = load_distilled(pipeline / "distill")
     with torch.no_grad():

@@ -24,7 +24,8 @@ from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
 from zsrm.vlm.files import write_json, write_text
 
 EVAL_SEED = 3_000_000  # evaluation scenes: seeds apart from the training and collection envs'
-POLICY_NAMES = {"none": "No Conditioning", "primitive": "Primitive Code Cond.", "language": "Language Cond."}
+POLICY_NAMES = {"none": "No Conditioning", "primitive": "Primitive Code Cond.", "language": "Language Cond.",
+                "grounded": "Grounded Language Cond. (zsrm)"}  # table order
 SPREADS = ("seen", "unseen")
 SPLITS = ("train", "test")
 
@@ -108,7 +109,7 @@ def table_markdown(table: dict) -> str:
     head = "| (oracle episode reward) | " + " | ".join(
         f"{spread} {split} mean | s.e." for spread in SPREADS for split in SPLITS) + " |"
     lines = [head, "|---" * (1 + 2 * len(SPREADS) * len(SPLITS)) + "|"]
-    for name in ("none", "primitive", "language"):
+    for name in POLICY_NAMES:
         if name in table:
             cells = [f"{table[name][s][p]['mean']:.2f} | {table[name][s][p]['se']:.2f}"
                      for s in SPREADS for p in SPLITS]
@@ -127,7 +128,7 @@ def plot_table(table: dict, path: str | Path) -> Path:
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 3.6))
     groups = [(s, p) for s in SPREADS for p in SPLITS]
-    names = [n for n in ("none", "primitive", "language") if n in table]
+    names = [n for n in POLICY_NAMES if n in table]
     width = 0.8 / max(1, len(names))
     for k, name in enumerate(names):
         x = np.arange(len(groups)) + (k - (len(names) - 1) / 2) * width
@@ -148,7 +149,7 @@ def table_rows(table: dict) -> list[dict]:
     """Table 2 as rows (one per policy, spread and split) for the CSV."""
     return [{"policy": name, "spread": spread, "split": split, "mean": table[name][spread][split]["mean"],
              "se": table[name][spread][split]["se"], "episodes": table[name][spread][split]["episodes"]}
-            for name in ("none", "primitive", "language") if name in table for spread in SPREADS for split in SPLITS]
+            for name in POLICY_NAMES if name in table for spread in SPREADS for split in SPLITS]
 
 
 def write_table(table: dict, path: str | Path) -> list[Path]:

@@ -155,23 +155,10 @@ class GradCAM:
             pixels = self._pixels(images[start:start + self.batch_size])
             with torch.no_grad():
                 feats = self.vlm.image_trunk(pixels).float()
-            m, s = self._head_gradcam(feats, weights)
+            m, s = head_gradcam(self.vlm.image_head, feats, weights)
             maps.append(m)
             scores.append(s)
         return torch.cat(maps), torch.cat(scores)
-
-    def _head_gradcam(self, feats: torch.Tensor, weights: torch.Tensor):
-        n, p = feats.shape[0], weights.shape[0]
-        # One copy of the activations per phrase: each copy's gradient is that phrase's.
-        rep = feats.repeat_interleave(p, dim=0).requires_grad_(True)
-        with torch.enable_grad():
-            emb = nn.functional.normalize(self.vlm.image_head(rep).float(), dim=-1)
-            target = (emb.view(n, p, -1) * weights[None]).sum(-1)
-            (grads,) = torch.autograd.grad(target.sum(), rep)
-        grads = grads.view(n, p, *feats.shape[1:])
-        alpha = grads.mean(dim=(-2, -1), keepdim=True)
-        maps = torch.relu((alpha * feats[:, None]).sum(dim=2))
-        return maps.detach(), target.detach()
 
     def reference_heatmaps(self, images, phrases: Sequence[str]) -> tuple[torch.Tensor, torch.Tensor]:
         """Plain Grad-CAM, the way it is usually written: for each phrase, a full forward
@@ -305,6 +292,25 @@ class GradCAM:
             found &= scores > self.presence_threshold
         xy[~found] = np.nan
         return GradCAMResult(tuple(phrases), maps, xy, peak, scores, found)
+
+
+def head_gradcam(head, feats: torch.Tensor, weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Grad-CAM through the image ``head`` alone: ``(maps (N, P, h, w), targets (N, P))`` for
+    Grad-CAM-layer activations ``feats`` (N, C, h, w) and target vectors ``weights`` (P, D),
+    or (N, P, D) when each image has its own phrases (the grounded policy's goals)."""
+    n = feats.shape[0]
+    weights = weights if weights.dim() == 3 else weights[None]
+    p = weights.shape[1]
+    # One copy of the activations per phrase: each copy's gradient is that phrase's.
+    rep = feats.detach().repeat_interleave(p, dim=0).requires_grad_(True)
+    with torch.enable_grad():
+        emb = nn.functional.normalize(head(rep).float(), dim=-1)
+        target = (emb.view(n, p, -1) * weights).sum(-1)
+        (grads,) = torch.autograd.grad(target.sum(), rep)
+    grads = grads.view(n, p, *feats.shape[1:])
+    alpha = grads.mean(dim=(-2, -1), keepdim=True)
+    maps = torch.relu((alpha * feats.detach()[:, None]).sum(dim=2))
+    return maps.detach(), target.detach()
 
 
 def grid_centres(grid: tuple[int, int], size: tuple[int, int]) -> np.ndarray:

@@ -154,16 +154,17 @@ class EvalMultitask:
         table.update(schedule=summary["schedule"], tower=summary["tower"],
                      oracle_task_policies={"mean": mean, "se": se, "episodes": len(data.episode_rewards),
                                            "tasks": len(data.goals)},
-                     meta=self.meta(summary, splits, primitive_mapping(next(iter(policies.values())), vlm,
-                                                                       splits["test"])))
+                     meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
+                                    if "primitive" in policies else None))
         for path in write_table(table, self.out):
             print(f"wrote {path}")
         return 0
 
-    def meta(self, summary: dict, splits: dict, mapping: dict) -> dict:
+    def meta(self, summary: dict, splits: dict, mapping: dict | None) -> dict:
         return {"seeds": self.seeds, "tasks_per_split": len(splits["train"]), "spreads": ["seen", "unseen"],
                 "epochs": summary["epochs"], "pretrained": summary["pretrained"], "vlm": summary["vlm"],
                 "text_embedding": summary["text_embedding"], "distilled_tasks": summary["goals"],
+                **{k: summary[k] for k in ("keypoint_view",) if k in summary},  # with a grounded policy
                 "primitive_mapping_test": mapping,
                 "metric": "oracle episode reward: control steps of 100 in the goal relation; mean and s.e. over "
                           "all episodes of the split (seeds x tasks)",

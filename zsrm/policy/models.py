@@ -5,7 +5,12 @@
 * ``primitive``: the same with a one-hot primitive code (the index of a training task) in
   place of the text; a goal is mapped to the training task whose text embedding is nearest in
   L2 distance (:meth:`DistilledPolicy.condition`), so test goals get a training task's code;
-* ``none``: two fc layers on the image encoding alone.
+* ``none``: two fc layers on the image encoding alone;
+* ``grounded`` (zsrm's variant, not the paper's): the language policy whose goal objects are
+  found by the scene VLM's Grad-CAM, as the reward's labeler finds them. The goal's two noun
+  phrases pick, through the VLM's image-text space, where each object is (a Grad-CAM map of
+  the frozen trunk's features, read as a centroid and a score) and the relation's words go
+  through the fc layer. A colour the policy never saw is found the way the VLM finds it.
 
 Image towers: ``resnet18`` (torchvision's, the paper's; ImageNet weights when the user has
 them) or ``scene`` (the scene VLM's image trunk, its Grad-CAM layer, read by spatial-softmax
@@ -33,12 +38,16 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from zsrm.grounding.gradcam import head_gradcam
 from zsrm.rl.features import SpatialSoftmax
 from zsrm.vlm.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
-from zsrm.vlm.scene import SceneConfig, SceneImageTower
+from zsrm.vlm.scene import SceneConfig, SceneImageTower, mean_max_pool
 
 KIND = "zsrm-multitask-policy"
-CONDITIONINGS = ("language", "primitive", "none")
+CONDITIONINGS = ("language", "primitive", "none", "grounded")
+GROUNDED_OBJECTS = 2  # the goal's objects a grounded policy locates (a two-object relation)
+KEYPOINT_VIEWS = ("colour", "grey", "none")
+LUMA = (0.299, 0.587, 0.114)  # ITU-R BT.601: grey frames for keypoint_view="grey"
 IMAGENET_MEAN, IMAGENET_STD = (0.485, 0.456, 0.406), (0.229, 0.224, 0.225)
 
 
@@ -46,7 +55,7 @@ IMAGENET_MEAN, IMAGENET_STD = (0.485, 0.456, 0.406), (0.229, 0.224, 0.225)
 class PolicyConfig:
     """A distilled policy's architecture and what it reads (saved in config.json)."""
 
-    conditioning: Literal["language", "primitive", "none"]
+    conditioning: Literal["language", "primitive", "none", "grounded"]
     tower: Literal["scene", "resnet18"]
     image_size: int  # frames are (image_size, image_size) from `camera`
     action_dim: int
@@ -56,7 +65,10 @@ class PolicyConfig:
     hidden: int = 256  # width of the fc layers
     keypoints: int = 32  # spatial-softmax keypoints on the scene tower's map
     vlm: str = "scene"  # the VLM whose text tower embeds goals
-    text_embedding: Literal["language", "joint"] = "language"  # see zsrm.policy.models.embed_goals
+    text_embedding: Literal["language", "joint", "grounded"] = "language"  # see zsrm.policy.models.embed_goals
+    # What a grounded policy's own keypoints look at: the frames, the frames in grey (no colour to
+    # tell the blocks apart by), or nothing (the goal objects' grounding is all it sees).
+    keypoint_view: Literal["colour", "grey", "none"] = "colour"
     camera: str = "front"
     action_repeat: int = 2  # control steps per decision, as the task policies acted
 
@@ -65,6 +77,14 @@ class PolicyConfig:
             raise ValueError(f"unknown conditioning {self.conditioning!r}; choose one of {', '.join(CONDITIONINGS)}")
         if self.tower == "scene" and self.scene is None:
             self.scene = SceneConfig()
+        if (self.conditioning == "grounded") != (self.text_embedding == "grounded"):
+            raise ValueError("the grounded policy, and only it, reads grounded goal embeddings")
+        if self.conditioning == "grounded" and self.tower != "scene":
+            raise ValueError("the grounded policy finds objects with the scene VLM's Grad-CAM: use --tower scene")
+        if self.keypoint_view not in KEYPOINT_VIEWS:
+            raise ValueError(f"unknown keypoint view {self.keypoint_view!r}; choose one of {', '.join(KEYPOINT_VIEWS)}")
+        if self.keypoint_view != "colour" and self.conditioning != "grounded":
+            raise ValueError("only the grounded policy's keypoints can look at grey frames or at nothing")
         if min(self.image_size, self.action_dim, self.text_dim, len(self.goals), self.hidden, self.keypoints) < 1:
             raise ValueError("image_size, action_dim, text_dim, hidden, keypoints and the goals must be positive")
 
@@ -105,8 +125,11 @@ class ImageEncoder(nn.Module):
         self.register_buffer("mean", torch.tensor(mean).view(1, 3, 1, 1))
         self.register_buffer("std", torch.tensor(std).view(1, 3, 1, 1))
 
+    def normalise(self, images: torch.Tensor) -> torch.Tensor:
+        return (images.float() / 255.0 - self.mean) / self.std
+
     def forward(self, images: torch.Tensor) -> torch.Tensor:
-        return self.net((images.float() / 255.0 - self.mean) / self.std)
+        return self.net(self.normalise(images))
 
     def load_scene_trunk(self, vlm) -> None:
         """Start the scene tower from a scene VLM's image trunk (its pretrained weights)."""
@@ -122,16 +145,25 @@ class DistilledPolicy(nn.Module):
         self.cfg = cfg
         self.encoder = ImageEncoder(cfg, pretrained)
         f, h, a = self.encoder.out_dim, cfg.hidden, cfg.action_dim
+        width = {"language": cfg.text_dim, "primitive": len(cfg.goals)}.get(cfg.conditioning)
+        if cfg.conditioning == "grounded":
+            # The trunk stays the VLM's (fine-tuning it on three colours would lose the fourth),
+            # and so does the head its Grad-CAM goes through.
+            self.encoder.net[0].requires_grad_(False)
+            self.grounding_proj = nn.Linear(2 * cfg.scene.widths[2], cfg.scene.embed_dim).requires_grad_(False)
+            f = (0 if cfg.keypoint_view == "none" else f) + 3 * GROUNDED_OBJECTS  # and each object's centroid, score
+            width = cfg.text_dim - GROUNDED_OBJECTS * cfg.scene.embed_dim  # the relation's words
         if cfg.conditioning == "none":
             self.head = nn.Sequential(nn.Linear(f, h), nn.ReLU(), nn.Linear(h, a))
         else:
             self.image_fc = nn.Sequential(nn.Linear(f, h), nn.ReLU())
-            width = cfg.text_dim if cfg.conditioning == "language" else len(cfg.goals)
             self.condition_fc = nn.Sequential(nn.Linear(width, h), nn.ReLU())
             self.head = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU(), nn.Linear(h, a))
         self.register_buffer("goal_embeddings", torch.zeros(len(cfg.goals), cfg.text_dim))
 
     def forward(self, images: torch.Tensor, condition: torch.Tensor | None = None) -> torch.Tensor:
+        if self.cfg.conditioning == "grounded":
+            return self._grounded(images, condition)
         z = self.encoder(images)
         if self.cfg.conditioning == "none":
             return self.head(z)
@@ -139,13 +171,37 @@ class DistilledPolicy(nn.Module):
             condition = F.one_hot(condition.long(), len(self.cfg.goals)).float()
         return self.head(torch.cat([self.image_fc(z), self.condition_fc(condition)], dim=1))
 
+    def _grounded(self, images: torch.Tensor, condition: torch.Tensor) -> torch.Tensor:
+        trunk, keypoints = self.encoder.net[0], self.encoder.net[1:]
+        with torch.no_grad():
+            feats = trunk(self.encoder.normalise(images))
+        n, e = feats.shape[0], self.cfg.scene.embed_dim
+        split = GROUNDED_OBJECTS * e
+        maps, scores = head_gradcam(lambda f: self.grounding_proj(mean_max_pool(f)), feats,
+                                    condition[:, :split].reshape(n, GROUNDED_OBJECTS, e))
+        z = [map_centroids(maps).flatten(1), scores]
+        if self.cfg.keypoint_view == "grey":
+            luma = torch.tensor(LUMA).view(1, 3, 1, 1)
+            with torch.no_grad():
+                feats = trunk(self.encoder.normalise((images.float() * luma).sum(1, keepdim=True).expand_as(images)))
+        if self.cfg.keypoint_view != "none":
+            z.insert(0, keypoints(feats))
+        z = torch.cat(z, dim=1)
+        return self.head(torch.cat([self.image_fc(z), self.condition_fc(condition[:, split:])], dim=1))
+
+    def load_scene_vlm(self, vlm) -> None:
+        """Start the scene tower (and a grounded policy's Grad-CAM head) from a scene VLM."""
+        self.encoder.load_scene_trunk(vlm)
+        if self.cfg.conditioning == "grounded":
+            self.grounding_proj.load_state_dict(vlm.visual.proj.state_dict())
+
     def nearest_codes(self, embeddings: torch.Tensor) -> torch.Tensor:
         """The primitive code of each goal embedding: the training task nearest in L2 distance."""
         return torch.cdist(embeddings.float(), self.goal_embeddings).argmin(dim=1)
 
     def condition(self, embeddings: torch.Tensor) -> torch.Tensor | None:
         """What :meth:`forward` reads for goals given by their text embeddings (N, text_dim)."""
-        if self.cfg.conditioning == "language":
+        if self.cfg.conditioning in ("language", "grounded"):
             return embeddings.float()
         return self.nearest_codes(embeddings) if self.cfg.conditioning == "primitive" else None
 
@@ -156,15 +212,49 @@ class DistilledPolicy(nn.Module):
         return self(images, self.condition(embeddings)).clamp(-1.0, 1.0)
 
 
+def map_centroids(maps: torch.Tensor, fraction: float = 0.5) -> torch.Tensor:
+    """(N, P, h, w) heat maps -> (N, P, 2) centroids (x, y) in [-1, 1] of the cells above
+    ``fraction`` of each map's peak (0, 0 for an empty map)."""
+    h, w = maps.shape[-2:]
+    mass = torch.relu(maps / maps.amax(dim=(-2, -1), keepdim=True).clamp_min(1e-8) - fraction)
+    total = mass.sum(dim=(-2, -1)).clamp_min(1e-8)
+    x = (mass * torch.linspace(-1, 1, w)).sum(dim=(-2, -1)) / total
+    y = (mass * torch.linspace(-1, 1, h)[:, None]).sum(dim=(-2, -1)) / total
+    return torch.stack([x, y], dim=-1)
+
+
 def embed_goals(vlm, goals, kind: str = "language") -> torch.Tensor:
     """Goal sentences' text embeddings (M, D). ``language``: the VLM's language encoder as it
     is (the paper feeds CLIP's language encoding; for the scene VLM, its frozen sentence encoder,
     before the projection that pretraining on presence-only captions taught to ignore
-    relation words); ``joint``: the normalised embedding in the image-text space."""
+    relation words); ``joint``: the normalised embedding in the image-text space; ``grounded``:
+    each object phrase's Grad-CAM target vector (contrasted with the goal's other phrase: no
+    other colour's words enter) then the relation words' language encoding."""
+    goals = list(goals)
+
+    def language(texts):
+        if hasattr(vlm, "sentence_features"):
+            return vlm.sentence_features(texts).float().cpu()
+        return vlm.encode_texts(texts, normalize=True).float().cpu()
+
     with torch.no_grad():
-        if kind == "language" and hasattr(vlm, "sentence_features"):
-            return vlm.sentence_features(list(goals)).float().cpu()
-        return vlm.encode_texts(list(goals), normalize=True).float().cpu()
+        if kind == "language":
+            return language(goals)
+        if kind == "joint":
+            return vlm.encode_texts(goals, normalize=True).float().cpu()
+        if kind != "grounded":
+            raise ValueError(f"unknown goal embedding {kind!r}; choose language, joint or grounded")
+        from zsrm.grounding.gradcam import GradCAM
+        from zsrm.tasks.language import parse_goal
+        from zsrm.tasks.relations import RELATIONS
+
+        tasks, cam = [parse_goal(g) for g in goals], GradCAM(vlm)
+        for goal, task in zip(goals, tasks):
+            if len(task.objects) != GROUNDED_OBJECTS:
+                raise ValueError(f"the grounded policy reads goals about {GROUNDED_OBJECTS} objects; {goal!r} "
+                                 f"names {len(task.objects)}")
+        targets = torch.stack([cam.target_vectors(t.phrases).flatten().cpu() for t in tasks])
+        return torch.cat([targets, language([RELATIONS[t.relation].phrase for t in tasks])], dim=1)
 
 
 def save_policy(policy: DistilledPolicy, folder: str | Path, training: dict | None = None) -> None:

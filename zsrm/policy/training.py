@@ -19,7 +19,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from zsrm.policy.models import DistilledPolicy, PolicyConfig, embed_goals, load_policy, save_policy
+from zsrm.policy.models import CONDITIONINGS, KEYPOINT_VIEWS, DistilledPolicy, PolicyConfig, embed_goals, load_policy, save_policy
 from zsrm.policy.rollouts import RolloutData
 from zsrm.vlm.files import read_json, write_json
 from zsrm.vlm.optim import load_optimizer, read_checkpoint_state, save_checkpoint
@@ -37,13 +37,15 @@ class DistillConfig:
     epochs: int | None = None
     """epochs over the rollouts (default: the schedule's)"""
     policies: tuple[str, ...] = ("language", "primitive", "none")
-    """which of the three policies to train"""
+    """which policies to train: the paper's three, and zsrm's grounded variant (zsrm.policy.models)"""
     pretrained: bool = True
     """start the tower from pretrained weights (scene: the VLM's trunk; resnet18: ImageNet)"""
     vlm: str = "scene"
     """the VLM whose text tower embeds the goals (and whose image trunk the scene tower starts from)"""
     text_embedding: Literal["language", "joint"] = "language"
     """goal embedding: the language encoder's own (as the paper feeds CLIP's) or the image-text space's"""
+    keypoint_view: Literal["colour", "grey", "none"] = "colour"
+    """what the grounded policy's own keypoints look at: the frames, grey frames, or nothing"""
     batch_size: int = 64
     """frames per step"""
     lr: float = 1e-4
@@ -58,9 +60,17 @@ class DistillConfig:
             raise ValueError(f"unknown schedule {self.schedule!r}; choose cpu or paper")
         self.tower = self.tower or SCHEDULES[self.schedule]["tower"]
         self.epochs = int(self.epochs or SCHEDULES[self.schedule]["epochs"])
-        unknown = set(self.policies) - {"language", "primitive", "none"}
+        unknown = set(self.policies) - set(CONDITIONINGS)
         if unknown or not self.policies:
-            raise ValueError(f"policies must be of language, primitive, none; got {', '.join(self.policies)}")
+            raise ValueError(f"policies must be of {', '.join(CONDITIONINGS)}; got {', '.join(self.policies)}")
+        if self.keypoint_view not in KEYPOINT_VIEWS:
+            raise ValueError(f"unknown keypoint view {self.keypoint_view!r}; choose one of {', '.join(KEYPOINT_VIEWS)}")
+        if self.text_embedding == "grounded":
+            raise ValueError("--text-embedding is the language policy's: language or joint (the grounded "
+                             "policy always reads grounded embeddings)")
+        if "grounded" in self.policies and (self.tower != "scene" or not self.pretrained):
+            raise ValueError("the grounded policy finds objects with the pretrained scene VLM: --tower scene, "
+                             "--pretrained")
         if min(self.epochs, self.batch_size, self.threads) < 1:
             raise ValueError("epochs, batch_size and threads must be >= 1")
 
@@ -88,46 +98,53 @@ def random_crops(images: torch.Tensor, generator: torch.Generator) -> torch.Tens
 @dataclass
 class CloningData:
     """The rollouts as tensors: frames (N, 3, H, W) uint8, actions (N, A), each frame's primitive
-    code (its task's position in ``goals``) and the goals' text embeddings (T, D)."""
+    code (its task's position in ``goals``) and the goals' embeddings (T, D) of each kind the
+    policies read (``embeddings[kind]``, see :func:`~zsrm.policy.models.embed_goals`)."""
 
     images: torch.Tensor
     actions: torch.Tensor
     codes: torch.Tensor
     goals: list[str]
-    embeddings: torch.Tensor
+    embeddings: dict[str, torch.Tensor]
     camera: str
     action_repeat: int
 
-    def condition(self, conditioning: str, index: torch.Tensor) -> torch.Tensor | None:
-        if conditioning == "language":
-            return self.embeddings[self.codes[index]]
-        return self.codes[index] if conditioning == "primitive" else None
+    def condition(self, cfg: PolicyConfig, index: torch.Tensor) -> torch.Tensor | None:
+        if cfg.conditioning in ("language", "grounded"):
+            return self.embeddings[cfg.text_embedding][self.codes[index]]
+        return self.codes[index] if cfg.conditioning == "primitive" else None
 
 
-def cloning_data(data: RolloutData, vlm, text_embedding: str) -> CloningData:
+def embedding_kind(cfg: DistillConfig, conditioning: str) -> str:
+    return "grounded" if conditioning == "grounded" else cfg.text_embedding
+
+
+def cloning_data(data: RolloutData, vlm, kinds) -> CloningData:
     arrays = data.load()
     lookup = np.full(int(arrays["task"].max()) + 1, -1, np.int64)
     lookup[[int(info["task"]) for info in data.infos]] = np.arange(len(data.infos))
     return CloningData(images=torch.from_numpy(arrays["frames"]).permute(0, 3, 1, 2).contiguous(),
                        actions=torch.from_numpy(arrays["actions"]).float(),
                        codes=torch.from_numpy(lookup[arrays["task"]]), goals=data.goals,
-                       embeddings=embed_goals(vlm, data.goals, text_embedding), camera=data.setting("camera"),
-                       action_repeat=int(data.setting("action_repeat")))
+                       embeddings={kind: embed_goals(vlm, data.goals, kind) for kind in sorted(set(kinds))},
+                       camera=data.setting("camera"), action_repeat=int(data.setting("action_repeat")))
 
 
 def build_policy(cfg: DistillConfig, conditioning: str, data: CloningData, vlm) -> DistilledPolicy:
     """A fresh policy for the rollouts, its tower started as ``cfg`` says."""
     if cfg.tower == "scene" and not hasattr(vlm, "visual"):
         raise ValueError(f"--tower scene starts from a scene VLM's image trunk; {cfg.vlm!r} is not one")
+    kind = embedding_kind(cfg, conditioning)
     pcfg = PolicyConfig(conditioning=conditioning, tower=cfg.tower, image_size=int(data.images.shape[-1]),
-                        action_dim=int(data.actions.shape[1]), text_dim=int(data.embeddings.shape[1]),
+                        action_dim=int(data.actions.shape[1]), text_dim=int(data.embeddings[kind].shape[1]),
                         goals=tuple(data.goals), scene=vlm.config if cfg.tower == "scene" else None, vlm=cfg.vlm,
-                        text_embedding=cfg.text_embedding, camera=data.camera, action_repeat=data.action_repeat)
+                        text_embedding=kind, camera=data.camera, action_repeat=data.action_repeat,
+                        keypoint_view=cfg.keypoint_view if conditioning == "grounded" else "colour")
     torch.manual_seed(cfg.seed)
     policy = DistilledPolicy(pcfg, pretrained=cfg.pretrained and cfg.tower == "resnet18")
     if cfg.tower == "scene" and cfg.pretrained:
-        policy.encoder.load_scene_trunk(vlm)
-    policy.goal_embeddings.copy_(data.embeddings)
+        policy.load_scene_vlm(vlm)
+    policy.goal_embeddings.copy_(data.embeddings[kind])
     return policy
 
 
@@ -139,7 +156,7 @@ def run_epoch(policy: DistilledPolicy, opt, data: CloningData, cfg: DistillConfi
     policy.train()
     for start in range(0, n, cfg.batch_size):
         index = order[start:start + cfg.batch_size]
-        pred = policy(random_crops(data.images[index], generator), data.condition(policy.cfg.conditioning, index))
+        pred = policy(random_crops(data.images[index], generator), data.condition(policy.cfg, index))
         loss = F.mse_loss(pred, data.actions[index])
         opt.zero_grad()
         loss.backward()
@@ -154,6 +171,8 @@ def identity(cfg: DistillConfig, conditioning: str, data: CloningData) -> dict:
     d = {**asdict(cfg), "conditioning": conditioning, "frames": len(data.actions), "goals": data.goals}
     for k in ("policies", "threads"):
         d.pop(k)
+    if conditioning != "grounded":  # only the grounded policy reads it
+        d.pop("keypoint_view")
     return json.loads(json.dumps(d))
 
 
@@ -196,11 +215,12 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
 
     torch.set_num_threads(cfg.threads)
     vlm = load_vlm(cfg.vlm)
-    data = cloning_data(RolloutData(data_folder), vlm, cfg.text_embedding)
+    data = cloning_data(RolloutData(data_folder), vlm, [embedding_kind(cfg, name) for name in cfg.policies])
     policies = {name: train_policy(cfg, name, data, vlm, Path(out) / name, progress, fresh)
                 for name in cfg.policies}
     summary = {"schedule": cfg.schedule, "tower": cfg.tower, "pretrained": cfg.pretrained, "epochs": cfg.epochs,
-               "vlm": cfg.vlm, "text_embedding": cfg.text_embedding, "data": str(data_folder),
+               "vlm": cfg.vlm, "text_embedding": cfg.text_embedding,
+               **({"keypoint_view": cfg.keypoint_view} if "grounded" in cfg.policies else {}), "data": str(data_folder),
                "frames": len(data.actions), "goals": data.goals,
                "policies": {name: {"folder": name, "final_loss": t["final_loss"]}
                             for name, t in policies.items()}}

@@ -175,10 +175,14 @@ class SceneImageTower(nn.Module):
         return [p for m in (self.stem, self.layer1, self.down, self.layer2, self.final) for p in m.parameters()]
 
     def head(self, features: torch.Tensor) -> torch.Tensor:
-        # Mean pooling sees how much of a colour there is, max pooling that it is there at all
-        # (a block is a handful of cells); both keep gradients to every cell for Grad-CAM.
-        pooled = torch.cat([features.mean(dim=(2, 3)), features.amax(dim=(2, 3))], dim=1)
-        return self.proj(pooled)
+        return self.proj(mean_max_pool(features))
+
+
+def mean_max_pool(features: torch.Tensor) -> torch.Tensor:
+    """(N, C, h, w) -> (N, 2C): the scene head's pooling. Mean pooling sees how much of a colour
+    there is, max pooling that it is there at all (a block is a handful of cells); both keep
+    gradients to every cell for Grad-CAM."""
+    return torch.cat([features.mean(dim=(2, 3)), features.amax(dim=(2, 3))], dim=1)
 
 
 class SceneVLM(VisionLanguageModel):
