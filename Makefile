@@ -58,7 +58,8 @@ results: setup
 	# Table 2 (hours on 2 cores: 18 PPO runs of 200k steps, then rollouts, distillation, 36 x 50 x 2 episodes)
 	$(VENV)/bin/zsrm multitask-policies --steps 200000 --out results/multitask/policies.json
 	$(VENV)/bin/zsrm multitask-rollouts --episodes 50 --out data/multitask/rollouts
-	$(VENV)/bin/zsrm distill --schedule cpu --data data/multitask/rollouts --out runs/multitask/distill
+	$(VENV)/bin/zsrm distill --schedule cpu --policies language primitive none grounded \
+		--data data/multitask/rollouts --out runs/multitask/distill
 	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill --data data/multitask/rollouts --seeds 50 \
 		--out results/table2.json
 

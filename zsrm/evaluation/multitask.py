@@ -118,7 +118,9 @@ def table_markdown(table: dict) -> str:
     lines += ["", f"Schedule `{table['schedule']}`, image tower `{table['tower']}`; {table['meta']['seeds']} seeds "
               f"per task, {table['meta']['tasks_per_split']} tasks per split. The {oracle['tasks']} zsrm-trained task "
               f"policies themselves (seen spread, the rollouts distilled from): {oracle['mean']:.2f} +- "
-              f"{oracle['se']:.2f}."]
+              f"{oracle['se']:.2f}."
+              + (f" The grounded policy's own keypoints look at: {table['meta']['keypoint_view']}."
+                 if "grounded" in table and "keypoint_view" in table["meta"] else "")]
     return "\n".join(lines) + "\n"
 
 
@@ -126,7 +128,7 @@ def plot_table(table: dict, path: str | Path) -> Path:
     """Bars of the mean (s.e. whiskers) per spread and split, one colour per policy; the task
     policies' own mean as a dashed line."""
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(7.5, 3.6))
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
     groups = [(s, p) for s in SPREADS for p in SPLITS]
     names = [n for n in POLICY_NAMES if n in table]
     width = 0.8 / max(1, len(names))
@@ -140,7 +142,8 @@ def plot_table(table: dict, path: str | Path) -> Path:
     ax.set_xticks(np.arange(len(groups)), [f"{s}\n{p} tasks" for s, p in groups])
     ax.set_ylabel("oracle episode reward (of 100)")
     ax.set_title(f"Table 2: multi-task policies ({table['schedule']} schedule, {table['tower']} tower)")
-    ax.legend(fontsize=8)
+    # Below the axes: inside, it would hide the bars.
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3, frameon=False)
     ax.grid(axis="y", alpha=0.3)
     return save_figure(fig, path)
 

@@ -100,7 +100,8 @@ class MultitaskRollouts:
 
 @dataclass
 class Distill(DistillConfig):
-    """Behaviour cloning of the language-conditioned, primitive-code and unconditioned policies."""
+    """Behaviour cloning of the language-conditioned, primitive-code and unconditioned policies (and
+    zsrm's grounded variant with --policies ... grounded)."""
 
     data: str = ROLLOUTS  # rollouts written by zsrm multitask-rollouts
     out: str = DISTILLED  # one folder per policy under here, and distill.json
