@@ -57,6 +57,9 @@ def main() -> None:
     args = parser.parse_args()
 
     summary, policies = load_distilled(args.policies)
+    # The paper's three: the grounded policy finds the goal's objects through the VLM's Grad-CAM,
+    # not through keypoints of its own (with its default view it has none).
+    policies = {name: policy for name, policy in policies.items() if name != "grounded"}
     vlm = load_vlm(summary["vlm"])
     rng = np.random.default_rng(0)
     # Per policy and moved block (blue; a training colour in a test scene; in a training scene):

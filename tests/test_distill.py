@@ -159,6 +159,16 @@ def test_the_grounded_policy_gives_one_action_per_frame_and_keeps_the_vlm_frozen
                      goals=goals, keypoint_view=view if view != "colour" else "grey")
 
 
+def test_distill_refuses_a_grounded_policy_it_cannot_build():
+    from zsrm.policy.training import DistillConfig
+
+    for bad in ({"tower": "resnet18"}, {"pretrained": False}, {"keypoint_view": "sepia"}):
+        with pytest.raises(ValueError, match="grounded|keypoint view"):
+            DistillConfig(policies=("grounded",), **bad)
+    with pytest.raises(ValueError, match="text-embedding"):
+        DistillConfig(text_embedding="grounded")
+
+
 def test_grounded_goal_embeddings_contrast_the_goals_own_two_objects():
     vlm = load_vlm("scene")
     e = vlm.config.embed_dim
@@ -169,7 +179,8 @@ def test_grounded_goal_embeddings_contrast_the_goals_own_two_objects():
     # Each object's target is its phrase minus the other's: swapping the objects swaps (and
     # negates) them; the relation's words are the same.
     assert torch.allclose(red_on_blue[:e], -red_on_blue[e:2 * e])
-    assert torch.allclose(red_on_blue[:e], blue_on_red[e:2 * e]) and torch.equal(red_on_blue[2 * e:], blue_on_red[2 * e:])
+    assert torch.allclose(red_on_blue[:e], blue_on_red[e:2 * e])
+    assert torch.equal(red_on_blue[2 * e:], blue_on_red[2 * e:])
     # Another relation changes only the relation's words.
     assert torch.equal(red_on_blue[:2 * e], red_left_of_blue[:2 * e])
     assert not torch.allclose(red_on_blue[2 * e:], red_left_of_blue[2 * e:])

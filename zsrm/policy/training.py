@@ -19,7 +19,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from zsrm.policy.models import CONDITIONINGS, KEYPOINT_VIEWS, DistilledPolicy, PolicyConfig, embed_goals, load_policy, save_policy
+from zsrm.policy.models import (CONDITIONINGS, KEYPOINT_VIEWS, DistilledPolicy, PolicyConfig, embed_goals, load_policy,
+                                save_policy)
 from zsrm.policy.rollouts import RolloutData
 from zsrm.vlm.files import read_json, write_json
 from zsrm.vlm.optim import load_optimizer, read_checkpoint_state, save_checkpoint
