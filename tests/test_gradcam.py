@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from zsrm.grounding.gradcam import GradCAM, grid_centres, locate
+from zsrm.grounding.gradcam import GradCAM, grid_centres, head_gradcam, locate
 from zsrm.testing import ColourVLM
 
 PHRASES = ["red block", "yellow block", "blue block"]
@@ -31,6 +31,23 @@ def test_batched_head_gradients_equal_reference():
         assert fast_maps.abs().max() > 0
         torch.testing.assert_close(fast_maps, ref_maps, atol=1e-4, rtol=1e-4)
         torch.testing.assert_close(fast_scores, ref_scores, atol=1e-4, rtol=1e-4)
+
+
+def test_per_image_phrases_give_each_image_its_own_maps():
+    """The grounded policy's case: each image has its own goal's phrases (weights (N, P, D))."""
+    rng = np.random.default_rng(0)
+    vlm = ColourVLM(32)
+    images = np.stack([_scene(rng) for _ in range(2)])
+    cam = GradCAM(vlm, contrast=PHRASES)
+    weights = cam.target_vectors(PHRASES)
+    with torch.no_grad():
+        feats = vlm.image_trunk(vlm.preprocess(images))
+    shared_maps, shared_scores = head_gradcam(vlm.image_head, feats, weights)
+    # Image 0 asks for (red, yellow), image 1 for (yellow, blue).
+    own_maps, own_scores = head_gradcam(vlm.image_head, feats, torch.stack([weights[[0, 1]], weights[[1, 2]]]))
+    torch.testing.assert_close(own_maps[0], shared_maps[0, [0, 1]])
+    torch.testing.assert_close(own_maps[1], shared_maps[1, [1, 2]])
+    torch.testing.assert_close(own_scores, torch.stack([shared_scores[0, [0, 1]], shared_scores[1, [1, 2]]]))
 
 
 def test_batched_equals_reference_on_a_trained_style_network():
