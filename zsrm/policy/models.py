@@ -38,8 +38,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from zsrm.grounding.gradcam import head_gradcam
+from zsrm.grounding.gradcam import GradCAM, head_gradcam
 from zsrm.rl.features import SpatialSoftmax
+from zsrm.tasks.language import parse_goal
+from zsrm.tasks.relations import RELATIONS
 from zsrm.vlm.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
 from zsrm.vlm.scene import SceneConfig, SceneImageTower, mean_max_pool
 
@@ -244,10 +246,6 @@ def embed_goals(vlm, goals, kind: str = "language") -> torch.Tensor:
             return vlm.encode_texts(goals, normalize=True).float().cpu()
         if kind != "grounded":
             raise ValueError(f"unknown goal embedding {kind!r}; choose language, joint or grounded")
-        from zsrm.grounding.gradcam import GradCAM
-        from zsrm.tasks.language import parse_goal
-        from zsrm.tasks.relations import RELATIONS
-
         tasks, cam = [parse_goal(g) for g in goals], GradCAM(vlm)
         for goal, task in zip(goals, tasks):
             if len(task.objects) != GROUNDED_OBJECTS:
