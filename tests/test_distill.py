@@ -5,12 +5,14 @@ import json
 import shutil
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
 from zsrm.pipeline.distill import Distill, EvalMultitask, MultitaskRollouts, train_goals
-from zsrm.policy.models import DistilledPolicy, PolicyConfig, embed_goals, load_policy, resnet18, save_policy
+from zsrm.policy.models import (SHAPE_GREY, DistilledPolicy, PolicyConfig, embed_goals, grey_frames, load_policy,
+                                resnet18, save_policy, shape_frames)
 from zsrm.policy.rollouts import RolloutData, keep_task_policies, policy_folder, train_task_index
 from zsrm.policy.training import load_distilled, random_crops
 from zsrm.rl import TrainConfig, train
@@ -125,7 +127,7 @@ def test_the_three_policies_give_one_action_per_frame(tmp_path, tower, condition
     assert json.loads((tmp_path / "config.json").read_text())["config"]["conditioning"] == conditioning
 
 
-@pytest.mark.parametrize("view", ["colour", "grey", "none"])
+@pytest.mark.parametrize("view", ["colour", "grey", "shape", "none"])
 def test_the_grounded_policy_gives_one_action_per_frame_and_keeps_the_vlm_frozen(tmp_path, view):
     vlm = load_vlm("scene")
     goals = ("a red block on top of a green block", "a green block on the left of a red block")
@@ -146,8 +148,16 @@ def test_the_grounded_policy_gives_one_action_per_frame_and_keeps_the_vlm_frozen
     loss = policy.train()(torch.as_tensor(frames).permute(0, 3, 1, 2), embeddings[[0, 1, 0, 1, 0]]).square().sum()
     loss.backward()
     assert policy.encoder.net[0][0][0].weight.grad is None and policy.head[0].weight.grad is not None
-    # The keypoint head learns unless the policy has no keypoints of its own.
-    assert (policy.encoder.net[1][0].weight.grad is None) == (view == "none")
+    # The keypoint head learns (with shapes, its own trunk copy too); with view none there is none.
+    if view in ("none", "shape"):
+        assert len(policy.encoder.net) == 1 and not any(n.startswith("encoder.net.1.") for n in policy.state_dict())
+    else:
+        assert policy.encoder.net[1][0].weight.grad is not None
+    if view == "shape":
+        assert policy.shape_encoder.net[0][0][0].weight.grad is not None
+        assert torch.equal(policy.shape_encoder.net[0].state_dict()["0.0.weight"], before)  # started from the VLM
+    else:
+        assert not hasattr(policy, "shape_encoder")
     assert torch.equal(policy.encoder.net[0].state_dict()["0.0.weight"], before)
     save_policy(policy.eval(), tmp_path)
     assert torch.equal(load_policy(tmp_path).act(frames, embeddings[[0, 1, 0, 1, 0]]), actions)
@@ -365,3 +375,24 @@ def test_blue_sensitivity_benchmark_measures_each_moved_block(pipeline, tmp_path
             cell = result[policy][moved]
             # A block that moves a block width moves the frame, so the keypoints move.
             assert cell["keypoint_shift"]["mean"] > 0 and cell["action_change"]["mean"] >= 0
+
+
+def test_shape_frames_paint_every_block_colour_one_grey_and_keep_the_rest_grey():
+    """The shape view shows where the blocks and the gripper are, never which colour a block is."""
+    frames = {}
+    for goal in ("a blue block on the left of a yellow block", "a red block on the left of a green block"):
+        env = gym.make("zsrm/Tabletop-v0", task=goal)
+        obs, info = env.reset(seed=0)
+        env.close()
+        frames[goal] = torch.as_tensor(obs["front"]).permute(2, 0, 1)[None]
+    blue, red = frames.values()
+    shapes = shape_frames(torch.cat([blue, red]))
+    assert torch.equal(shapes[:, 0], shapes[:, 1]) and torch.equal(shapes[:, 0], shapes[:, 2])  # grey
+    painted = shapes[:, 0] == SHAPE_GREY
+    # Two 6 cm blocks at 64 px cover about 94 pixels, every one of them painted, whatever its colour.
+    assert all(80 <= int(m.sum()) <= 110 for m in painted)
+    rest = ~painted
+    assert torch.equal(shapes[:, 0][rest], grey_frames(torch.cat([blue, red]))[:, 0][rest])
+    # Same seed, same layout: with the colours swapped the shape frames are the same but for the
+    # blocks' own positions.
+    assert (shapes[0] != shapes[1]).float().mean() < 0.05

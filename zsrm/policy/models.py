@@ -48,8 +48,12 @@ from zsrm.vlm.scene import SceneConfig, SceneImageTower, mean_max_pool
 KIND = "zsrm-multitask-policy"
 CONDITIONINGS = ("language", "primitive", "none", "grounded")
 GROUNDED_OBJECTS = 2  # the goal's objects a grounded policy locates (a two-object relation)
-KEYPOINT_VIEWS = ("colour", "grey", "none")
+KEYPOINT_VIEWS = ("colour", "grey", "shape", "none")
 LUMA = (0.299, 0.587, 0.114)  # ITU-R BT.601: grey frames for keypoint_view="grey"
+# keypoint_view="shape": a pixel this saturated is a coloured object's and is painted SHAPE_GREY.
+# In the rendered scenes the table and the sky are at most 0.4 and every block colour, blue
+# included, at least 0.7 (64 px frames).
+SHAPE_SATURATION, SHAPE_GREY = 0.55, 128.0
 IMAGENET_MEAN, IMAGENET_STD = (0.485, 0.456, 0.406), (0.229, 0.224, 0.225)
 
 
@@ -68,9 +72,10 @@ class PolicyConfig:
     keypoints: int = 32  # spatial-softmax keypoints on the scene tower's map
     vlm: str = "scene"  # the VLM whose text tower embeds goals
     text_embedding: Literal["language", "joint", "grounded"] = "language"  # see zsrm.policy.models.embed_goals
-    # What a grounded policy's own keypoints look at: the frames, the frames in grey (no colour to
-    # tell the blocks apart by), or nothing (the goal objects' grounding is all it sees).
-    keypoint_view: Literal["colour", "grey", "none"] = "colour"
+    # What a grounded policy's own keypoints look at: the frames, the frames in grey, the frames in
+    # grey with every coloured object one grey (shapes, no colour to tell the blocks apart by; its
+    # own trunk copy trains), or nothing (the goal objects' grounding is all it sees).
+    keypoint_view: Literal["colour", "grey", "shape", "none"] = "colour"
     camera: str = "front"
     action_repeat: int = 2  # control steps per decision, as the task policies acted
 
@@ -86,7 +91,7 @@ class PolicyConfig:
         if self.keypoint_view not in KEYPOINT_VIEWS:
             raise ValueError(f"unknown keypoint view {self.keypoint_view!r}; choose one of {', '.join(KEYPOINT_VIEWS)}")
         if self.keypoint_view != "colour" and self.conditioning != "grounded":
-            raise ValueError("only the grounded policy's keypoints can look at grey frames or at nothing")
+            raise ValueError("only the grounded policy's keypoints can look at grey frames, shapes or nothing")
         if min(self.image_size, self.action_dim, self.text_dim, len(self.goals), self.hidden, self.keypoints) < 1:
             raise ValueError("image_size, action_dim, text_dim, hidden, keypoints and the goals must be positive")
 
@@ -111,7 +116,9 @@ def resnet18(pretrained: bool) -> nn.Module:
 class ImageEncoder(nn.Module):
     """uint8 frames (N, 3, H, W) -> a feature vector per frame (``out_dim``)."""
 
-    def __init__(self, cfg: PolicyConfig, pretrained: bool = False):
+    def __init__(self, cfg: PolicyConfig, pretrained: bool = False, keypoints: bool = True):
+        """``keypoints=False``: the scene trunk alone (``out_dim`` 0), for a grounded policy whose
+        keypoints look at nothing."""
         super().__init__()
         if cfg.tower == "resnet18":
             mean, std = IMAGENET_MEAN, IMAGENET_STD
@@ -122,8 +129,11 @@ class ImageEncoder(nn.Module):
             trunk = nn.Sequential(t.stem, t.layer1, t.down, t.layer2, t.final)
             with torch.no_grad():
                 _, c, h, w = trunk(torch.zeros(1, 3, cfg.image_size, cfg.image_size)).shape
-            heat = nn.Sequential(nn.Conv2d(c, 64, 1), nn.ReLU(), nn.Conv2d(64, cfg.keypoints, 1))
-            self.net, self.out_dim = nn.Sequential(trunk, heat, SpatialSoftmax(h, w)), 3 * cfg.keypoints
+            if keypoints:
+                heat = nn.Sequential(nn.Conv2d(c, 64, 1), nn.ReLU(), nn.Conv2d(64, cfg.keypoints, 1))
+                self.net, self.out_dim = nn.Sequential(trunk, heat, SpatialSoftmax(h, w)), 3 * cfg.keypoints
+            else:
+                self.net, self.out_dim = nn.Sequential(trunk), 0
         self.register_buffer("mean", torch.tensor(mean).view(1, 3, 1, 1))
         self.register_buffer("std", torch.tensor(std).view(1, 3, 1, 1))
 
@@ -145,15 +155,21 @@ class DistilledPolicy(nn.Module):
     def __init__(self, cfg: PolicyConfig, pretrained: bool = False):
         super().__init__()
         self.cfg = cfg
-        self.encoder = ImageEncoder(cfg, pretrained)
+        grounded = cfg.conditioning == "grounded"
+        self.encoder = ImageEncoder(cfg, pretrained, keypoints=not (grounded and cfg.keypoint_view in ("none", "shape")))
         f, h, a = self.encoder.out_dim, cfg.hidden, cfg.action_dim
+        if grounded and cfg.keypoint_view == "shape":
+            # Shape frames show no colour, so this trunk can learn the gripper without learning
+            # to tell three colours apart.
+            self.shape_encoder = ImageEncoder(cfg, pretrained)
+            f = self.shape_encoder.out_dim
         width = {"language": cfg.text_dim, "primitive": len(cfg.goals)}.get(cfg.conditioning)
         if cfg.conditioning == "grounded":
             # The trunk stays the VLM's (fine-tuning it on three colours would lose the fourth),
             # and so does the head its Grad-CAM goes through.
             self.encoder.net[0].requires_grad_(False)
             self.grounding_proj = nn.Linear(2 * cfg.scene.widths[2], cfg.scene.embed_dim).requires_grad_(False)
-            f = (0 if cfg.keypoint_view == "none" else f) + 3 * GROUNDED_OBJECTS  # and each object's centroid, score
+            f += 3 * GROUNDED_OBJECTS  # and each object's centroid and score
             width = cfg.text_dim - GROUNDED_OBJECTS * cfg.scene.embed_dim  # the relation's words
         if cfg.conditioning == "none":
             self.head = nn.Sequential(nn.Linear(f, h), nn.ReLU(), nn.Linear(h, a))
@@ -183,17 +199,20 @@ class DistilledPolicy(nn.Module):
                                     condition[:, :split].reshape(n, GROUNDED_OBJECTS, e))
         z = [map_centroids(maps).flatten(1), scores]
         if self.cfg.keypoint_view == "grey":
-            luma = torch.tensor(LUMA).view(1, 3, 1, 1)
             with torch.no_grad():
-                feats = trunk(self.encoder.normalise((images.float() * luma).sum(1, keepdim=True).expand_as(images)))
-        if self.cfg.keypoint_view != "none":
+                feats = trunk(self.encoder.normalise(grey_frames(images)))
+        if self.cfg.keypoint_view in ("colour", "grey"):
             z.insert(0, keypoints(feats))
+        elif self.cfg.keypoint_view == "shape":
+            z.insert(0, self.shape_encoder(shape_frames(images)))
         z = torch.cat(z, dim=1)
         return self.head(torch.cat([self.image_fc(z), self.condition_fc(condition[:, split:])], dim=1))
 
     def load_scene_vlm(self, vlm) -> None:
         """Start the scene tower (and a grounded policy's Grad-CAM head) from a scene VLM."""
         self.encoder.load_scene_trunk(vlm)
+        if hasattr(self, "shape_encoder"):
+            self.shape_encoder.load_scene_trunk(vlm)
         if self.cfg.conditioning == "grounded":
             self.grounding_proj.load_state_dict(vlm.visual.proj.state_dict())
 
@@ -212,6 +231,20 @@ class DistilledPolicy(nn.Module):
         """Actions in [-1, 1] for camera frames (N, H, W, 3) uint8 and their goals' embeddings."""
         images = torch.as_tensor(frames).permute(0, 3, 1, 2)
         return self(images, self.condition(embeddings)).clamp(-1.0, 1.0)
+
+
+def grey_frames(images: torch.Tensor) -> torch.Tensor:
+    """(N, 3, H, W) frames (0-255) in grey, the luma in all three channels (float)."""
+    return (images.float() * torch.tensor(LUMA).view(1, 3, 1, 1)).sum(1, keepdim=True).expand_as(images)
+
+
+def shape_frames(images: torch.Tensor) -> torch.Tensor:
+    """(N, 3, H, W) frames (0-255) in grey with every coloured object's pixel SHAPE_GREY: the
+    objects' shapes and the gripper, and nothing to tell one colour from another (float)."""
+    x = images.float()
+    high, low = x.amax(dim=1, keepdim=True), x.amin(dim=1, keepdim=True)
+    coloured = (high - low) > SHAPE_SATURATION * high.clamp_min(1e-6)
+    return torch.where(coloured.expand_as(x), torch.full_like(x, SHAPE_GREY), grey_frames(images))
 
 
 def map_centroids(maps: torch.Tensor, fraction: float = 0.5) -> torch.Tensor:

@@ -45,9 +45,9 @@ class DistillConfig:
     """the VLM whose text tower embeds the goals (and whose image trunk the scene tower starts from)"""
     text_embedding: Literal["language", "joint"] = "language"
     """goal embedding: the language encoder's own (as the paper feeds CLIP's) or the image-text space's"""
-    keypoint_view: Literal["colour", "grey", "none"] = "none"
-    """what the grounded policy's own keypoints look at: the frames, grey frames, or nothing (none: the
-    only view that followed blue goals, results/multitask/table2_grounded*)"""
+    keypoint_view: Literal["colour", "grey", "shape", "none"] = "none"
+    """what the grounded policy's own keypoints look at: the frames, grey frames, grey frames with every
+    coloured object one grey (through a trunk copy that trains), or nothing (results/multitask/table2_grounded*)"""
     batch_size: int = 64
     """frames per step"""
     lr: float = 1e-4
