@@ -41,14 +41,14 @@ def main() -> None:
     vlm = load_vlm(policy.cfg.vlm)
     goals = split_goals()
     train, test = goals["train"], goals["test"]
-    grounded_train = embed_goals(vlm, train, "grounded")
+    embedded = {space: (embed_goals(vlm, test, space), embed_goals(vlm, train, space)) for space in MAPPINGS}
     # What the policy reads per test goal: its own embedding, or its nearest training goal's.
-    readings = {"own": embed_goals(vlm, test, "grounded")}
+    readings = {"own": embedded["grounded"][0]}
     nearest = {}
     for space in MAPPINGS:
-        codes = torch.cdist(embed_goals(vlm, test, space), embed_goals(vlm, train, space)).argmin(dim=1)
+        codes = torch.cdist(*embedded[space]).argmin(dim=1)
         nearest[space] = [train[int(c)] for c in codes]
-        readings[space] = grounded_train[codes]
+        readings[space] = embedded["grounded"][1][codes]
 
     out = {"policy": args.policy, "spread": args.spread, "seeds": args.seeds, "eval_seed": EVAL_SEED}
     for name, embeddings in readings.items():
