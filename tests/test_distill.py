@@ -127,6 +127,34 @@ def test_the_three_policies_give_one_action_per_frame(tmp_path, tower, condition
     assert json.loads((tmp_path / "config.json").read_text())["config"]["conditioning"] == conditioning
 
 
+@pytest.mark.parametrize("view", ["grey", "shape"])
+def test_the_papers_policies_can_read_grey_or_shape_frames(tmp_path, view):
+    """--image-view: the image tower reads what the view keeps, so frames that differ only in what
+    it drops give the same action."""
+    cfg = PolicyConfig(conditioning="none", tower="scene", image_size=64, action_dim=3, text_dim=6,
+                       goals=("a red block on top of a green block",), scene=SMALL_SCENE, hidden=16, keypoints=4,
+                       keypoint_view=view)
+    policy = DistilledPolicy(cfg).eval()
+    frames = np.random.default_rng(0).integers(0, 255, (2, 64, 64, 3), dtype=np.uint8)
+    if view == "grey":  # the same luma in another colour: (r, g, b) -> its grey level in all three
+        other = grey_frames(torch.as_tensor(frames).permute(0, 3, 1, 2)).round().byte().permute(0, 2, 3, 1).numpy()
+    else:  # every saturated pixel another saturated colour
+        other = frames.copy()
+        coloured = shape_frames(torch.as_tensor(frames).permute(0, 3, 1, 2))[:, 0] == SHAPE_GREY
+        other[coloured.numpy()] = (20, 40, 230)
+    colour = DistilledPolicy(PolicyConfig(**{**cfg.__dict__, "keypoint_view": "colour"})).eval()
+    colour.load_state_dict(policy.state_dict())
+    moved = (colour.act(frames, None) - colour.act(other, None)).abs().max()
+    same = (policy.act(frames, None) - policy.act(other, None)).abs().max()
+    # Shape frames are equal; grey ones up to the byte rounding of the luma (half a grey level).
+    assert same == 0 if view == "shape" else same < 0.05 * moved
+    save_policy(policy, tmp_path)
+    assert load_policy(tmp_path).cfg.keypoint_view == view
+    with pytest.raises(ValueError, match="image view"):
+        from zsrm.policy.training import DistillConfig
+        DistillConfig(image_view="none")
+
+
 @pytest.mark.parametrize("view", ["colour", "grey", "shape", "none"])
 def test_the_grounded_policy_gives_one_action_per_frame_and_keeps_the_vlm_frozen(tmp_path, view):
     vlm = load_vlm("scene")
@@ -166,7 +194,7 @@ def test_the_grounded_policy_gives_one_action_per_frame_and_keeps_the_vlm_frozen
                      goals=goals, text_embedding="grounded")
     with pytest.raises(ValueError, match="only the grounded"):
         PolicyConfig(conditioning="language", tower="scene", image_size=64, action_dim=3, text_dim=8,
-                     goals=goals, keypoint_view=view if view != "colour" else "grey")
+                     goals=goals, keypoint_view="none")
 
 
 def test_distill_refuses_a_grounded_policy_it_cannot_build():

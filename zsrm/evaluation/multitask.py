@@ -120,7 +120,9 @@ def table_markdown(table: dict) -> str:
               f"policies themselves (seen spread, the rollouts distilled from): {oracle['mean']:.2f} +- "
               f"{oracle['se']:.2f}."
               + (f" The grounded policy's own keypoints look at: {table['meta']['keypoint_view']}."
-                 if "grounded" in table and "keypoint_view" in table["meta"] else "")]
+                 if "grounded" in table and "keypoint_view" in table["meta"] else "")
+              + (f" The paper's policies' image tower reads {table['meta']['image_view']} frames."
+                 if table["meta"].get("image_view", "colour") != "colour" else "")]
     return "\n".join(lines) + "\n"
 
 

@@ -165,7 +165,7 @@ class EvalMultitask:
         return {"seeds": self.seeds, "tasks_per_split": len(splits["train"]), "spreads": ["seen", "unseen"],
                 "epochs": summary["epochs"], "pretrained": summary["pretrained"], "vlm": summary["vlm"],
                 "text_embedding": summary["text_embedding"], "distilled_tasks": summary["goals"],
-                **({"keypoint_view": summary["keypoint_view"]} if "keypoint_view" in summary else {}),
+                **{k: summary[k] for k in ("keypoint_view", "image_view") if k in summary},
                 "primitive_mapping_test": mapping,
                 "metric": "oracle episode reward: control steps of 100 in the goal relation; mean and s.e. over "
                           "all episodes of the split (seeds x tasks)",

@@ -49,6 +49,7 @@ KIND = "zsrm-multitask-policy"
 CONDITIONINGS = ("language", "primitive", "none", "grounded")
 GROUNDED_OBJECTS = 2  # the goal's objects a grounded policy locates (a two-object relation)
 KEYPOINT_VIEWS = ("colour", "grey", "shape", "none")
+IMAGE_VIEWS = KEYPOINT_VIEWS[:3]  # what the paper's three policies can read (they need image features)
 LUMA = (0.299, 0.587, 0.114)  # ITU-R BT.601: grey frames for keypoint_view="grey"
 # keypoint_view="shape": a pixel this saturated is a coloured object's and is painted SHAPE_GREY.
 # In the rendered scenes the table and the sky are at most 0.4 and every block colour, blue
@@ -72,9 +73,10 @@ class PolicyConfig:
     keypoints: int = 32  # spatial-softmax keypoints on the scene tower's map
     vlm: str = "scene"  # the VLM whose text tower embeds goals
     text_embedding: Literal["language", "joint", "grounded"] = "language"  # see zsrm.policy.models.embed_goals
-    # What a grounded policy's own keypoints look at: the frames, the frames in grey, the frames in
-    # grey with every coloured object one grey (shapes, no colour to tell the blocks apart by; its
-    # own trunk copy trains), or nothing (the goal objects' grounding is all it sees).
+    # What the policy's own image features look at: the frames, the frames in grey, the frames in
+    # grey with every coloured object one grey (shapes, no colour to tell the blocks apart by; a
+    # grounded policy's keypoints get their own trunk copy, which trains), or, for a grounded
+    # policy only, nothing (the goal objects' grounding is all it sees).
     keypoint_view: Literal["colour", "grey", "shape", "none"] = "colour"
     camera: str = "front"
     action_repeat: int = 2  # control steps per decision, as the task policies acted
@@ -90,8 +92,8 @@ class PolicyConfig:
             raise ValueError("the grounded policy finds objects with the scene VLM's Grad-CAM: use --tower scene")
         if self.keypoint_view not in KEYPOINT_VIEWS:
             raise ValueError(f"unknown keypoint view {self.keypoint_view!r}; choose one of {', '.join(KEYPOINT_VIEWS)}")
-        if self.keypoint_view != "colour" and self.conditioning != "grounded":
-            raise ValueError("only the grounded policy's keypoints can look at grey frames, shapes or nothing")
+        if self.keypoint_view == "none" and self.conditioning != "grounded":
+            raise ValueError("only the grounded policy can do without image features of its own (keypoint view none)")
         if min(self.image_size, self.action_dim, self.text_dim, len(self.goals), self.hidden, self.keypoints) < 1:
             raise ValueError("image_size, action_dim, text_dim, hidden, keypoints and the goals must be positive")
 
@@ -182,7 +184,7 @@ class DistilledPolicy(nn.Module):
     def forward(self, images: torch.Tensor, condition: torch.Tensor | None = None) -> torch.Tensor:
         if self.cfg.conditioning == "grounded":
             return self._grounded(images, condition)
-        z = self.encoder(images)
+        z = self.encoder(view_frames(images, self.cfg.keypoint_view))
         if self.cfg.conditioning == "none":
             return self.head(z)
         if self.cfg.conditioning == "primitive":
@@ -231,6 +233,11 @@ class DistilledPolicy(nn.Module):
         """Actions in [-1, 1] for camera frames (N, H, W, 3) uint8 and their goals' embeddings."""
         images = torch.as_tensor(frames).permute(0, 3, 1, 2)
         return self(images, self.condition(embeddings)).clamp(-1.0, 1.0)
+
+
+def view_frames(images: torch.Tensor, view: str) -> torch.Tensor:
+    """(N, 3, H, W) frames as ``view`` shows them: as they are (colour), grey, or shapes."""
+    return {"grey": grey_frames, "shape": shape_frames}.get(view, lambda x: x)(images)
 
 
 def grey_frames(images: torch.Tensor) -> torch.Tensor:

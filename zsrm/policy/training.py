@@ -19,8 +19,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from zsrm.policy.models import (CONDITIONINGS, KEYPOINT_VIEWS, DistilledPolicy, PolicyConfig, embed_goals, load_policy,
-                                save_policy)
+from zsrm.policy.models import (CONDITIONINGS, IMAGE_VIEWS, KEYPOINT_VIEWS, DistilledPolicy, PolicyConfig,
+                                embed_goals, load_policy, save_policy)
 from zsrm.policy.rollouts import RolloutData
 from zsrm.vlm.files import read_json, write_json
 from zsrm.vlm.optim import load_optimizer, read_checkpoint_state, save_checkpoint
@@ -48,6 +48,10 @@ class DistillConfig:
     keypoint_view: Literal["colour", "grey", "shape", "none"] = "none"
     """what the grounded policy's own keypoints look at: the frames, grey frames, grey frames with every
     coloured object one grey (through a trunk copy that trains), or nothing (results/multitask/table2_grounded*)"""
+    image_view: Literal["colour", "grey", "shape"] = "colour"
+    """what the paper's three policies' image tower reads: the frames (as the paper), grey frames, or shape
+    frames (grey, every coloured object one grey): a probe of whether colour-trained features stop them
+    following a colour never seen (results/multitask/table2_view_*)"""
     batch_size: int = 64
     """frames per step"""
     lr: float = 1e-4
@@ -67,6 +71,8 @@ class DistillConfig:
             raise ValueError(f"policies must be of {', '.join(CONDITIONINGS)}; got {', '.join(self.policies)}")
         if self.keypoint_view not in KEYPOINT_VIEWS:
             raise ValueError(f"unknown keypoint view {self.keypoint_view!r}; choose one of {', '.join(KEYPOINT_VIEWS)}")
+        if self.image_view not in IMAGE_VIEWS:
+            raise ValueError(f"unknown image view {self.image_view!r}; choose one of {', '.join(IMAGE_VIEWS)}")
         if self.text_embedding == "grounded":
             raise ValueError("--text-embedding is the language policy's: language or joint (the grounded "
                              "policy always reads grounded embeddings)")
@@ -141,7 +147,7 @@ def build_policy(cfg: DistillConfig, conditioning: str, data: CloningData, vlm) 
                         action_dim=int(data.actions.shape[1]), text_dim=int(data.embeddings[kind].shape[1]),
                         goals=tuple(data.goals), scene=vlm.config if cfg.tower == "scene" else None, vlm=cfg.vlm,
                         text_embedding=kind, camera=data.camera, action_repeat=data.action_repeat,
-                        keypoint_view=cfg.keypoint_view if conditioning == "grounded" else "colour")
+                        keypoint_view=cfg.keypoint_view if conditioning == "grounded" else cfg.image_view)
     torch.manual_seed(cfg.seed)
     policy = DistilledPolicy(pcfg, pretrained=cfg.pretrained and cfg.tower == "resnet18")
     if cfg.tower == "scene" and cfg.pretrained:
@@ -175,6 +181,8 @@ def identity(cfg: DistillConfig, conditioning: str, data: CloningData) -> dict:
         d.pop(k)
     if conditioning != "grounded":  # only the grounded policy reads it
         d.pop("keypoint_view")
+    if conditioning == "grounded" or cfg.image_view == "colour":  # as before image_view existed
+        d.pop("image_view")
     return json.loads(json.dumps(d))
 
 
@@ -222,7 +230,8 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
                 for name in cfg.policies}
     summary = {"schedule": cfg.schedule, "tower": cfg.tower, "pretrained": cfg.pretrained, "epochs": cfg.epochs,
                "vlm": cfg.vlm, "text_embedding": cfg.text_embedding,
-               **({"keypoint_view": cfg.keypoint_view} if "grounded" in cfg.policies else {}), "data": str(data_folder),
+               **({"keypoint_view": cfg.keypoint_view} if "grounded" in cfg.policies else {}),
+               **({"image_view": cfg.image_view} if set(cfg.policies) - {"grounded"} else {}), "data": str(data_folder),
                "frames": len(data.actions), "goals": data.goals,
                "policies": {name: {"folder": name, "final_loss": t["final_loss"]}
                             for name, t in policies.items()}}
