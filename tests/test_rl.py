@@ -79,6 +79,23 @@ def test_saved_policy_reloads_and_acts_the_same(tmp_path):
     c = PolicyBundle.load(tmp_path / "checkpoint")
     assert np.array_equal(a.act(obs), c.act(obs))
     assert a.cfg == cfg
+    # zsrm rollout samples the actions (eval_deterministic is off) from its seed: same seed, same episodes.
+    from zsrm.rl.evaluate import rollout
+
+    taken, act = [], PolicyBundle.act
+
+    def record(self, obs, deterministic=True):
+        taken.append(act(self, obs, deterministic))
+        return taken[-1]
+
+    runs = []
+    for seed in (3, 3, 4):
+        taken.clear()
+        with pytest.MonkeyPatch.context() as m:
+            m.setattr(PolicyBundle, "act", record)
+            rollout(tmp_path / "policy", episodes=2, seed=seed)
+        runs.append(np.concatenate(taken))
+    assert not cfg.eval_deterministic and np.array_equal(runs[0], runs[1]) and not np.array_equal(runs[0], runs[2])
 
 
 def test_policy_folder_errors_name_the_file(tmp_path):

@@ -85,6 +85,9 @@ def rollout(policy: str | Path, episodes: int = 10, seed: int = 0, spread: str =
         def features(venv):
             return VecImageFeatures(venv, vlm, goal_camera(cfg.goal))
 
+    import torch
+
+    torch.manual_seed(eval_seed(seed))  # a policy that samples its actions: same seed, same episodes
     frames = []
     if gif:
         record = FirstEpisodeFrames(goal_camera(cfg.goal), frames)
