@@ -14,7 +14,7 @@ from zsrm.pipeline.distill import Distill, EvalMultitask, MultitaskRollouts, tra
 from zsrm.policy.models import (SHAPE_GREY, DistilledPolicy, PolicyConfig, embed_goals, grey_frames, load_policy,
                                 resnet18, save_policy, shape_frames)
 from zsrm.policy.rollouts import RolloutData, keep_task_policies, policy_folder, train_task_index
-from zsrm.policy.training import load_distilled, random_crops
+from zsrm.policy.training import DistillConfig, load_distilled, random_crops
 from zsrm.rl import TrainConfig, train
 from zsrm.rl.envs import make_vec
 from zsrm.rl.sweep import trial_grid
@@ -151,8 +151,9 @@ def test_the_papers_policies_can_read_grey_or_shape_frames(tmp_path, view):
     save_policy(policy, tmp_path)
     assert load_policy(tmp_path).cfg.keypoint_view == view
     with pytest.raises(ValueError, match="image view"):
-        from zsrm.policy.training import DistillConfig
         DistillConfig(image_view="none")
+    # The cpu schedule reads grey frames (its scene tower's features are colour-bound), the paper's colour.
+    assert DistillConfig().image_view == "grey" and DistillConfig(schedule="paper").image_view == "colour"
 
 
 @pytest.mark.parametrize("view", ["colour", "grey", "shape", "none"])
@@ -198,8 +199,6 @@ def test_the_grounded_policy_gives_one_action_per_frame_and_keeps_the_vlm_frozen
 
 
 def test_distill_refuses_a_grounded_policy_it_cannot_build():
-    from zsrm.policy.training import DistillConfig
-
     for bad in ({"tower": "resnet18"}, {"pretrained": False}, {"keypoint_view": "sepia"}):
         with pytest.raises(ValueError, match="grounded|keypoint view"):
             DistillConfig(policies=("grounded",), **bad)
@@ -301,7 +300,9 @@ def test_tiny_end_to_end_writes_table2(pipeline):
             for split in ("train", "test"):
                 cell = table[policy][spread][split]
                 assert 0 <= cell["mean"] <= 100 and cell["se"] >= 0 and cell["episodes"] == 4
-    assert table["schedule"] == "cpu" and table["tower"] == "scene"
+    assert table["schedule"] == "cpu" and table["tower"] == "scene" and table["image_view"] == "grey"
+    assert load_policy(pipeline / "distill" / "language").cfg.keypoint_view == "grey"
+    assert "reads grey frames" in (pipeline / "table2.md").read_text()
     assert table["oracle_task_policies"]["episodes"] == 4 and 0 <= table["oracle_task_policies"]["mean"] <= 100
     assert set(table["meta"]["primitive_mapping_test"].values()) <= set(GOALS)
     md = (pipeline / "table2.md").read_text()

@@ -121,8 +121,8 @@ def table_markdown(table: dict) -> str:
               f"{oracle['se']:.2f}."
               + (f" The grounded policy's own keypoints look at: {table['meta']['keypoint_view']}."
                  if "grounded" in table and "keypoint_view" in table["meta"] else "")
-              + (f" The paper's policies' image tower reads {table['meta']['image_view']} frames."
-                 if table["meta"].get("image_view", "colour") != "colour" else "")]
+              + (f" The paper's policies' image tower reads {table['image_view']} frames."
+                 if "image_view" in table else "")]
     return "\n".join(lines) + "\n"
 
 
@@ -143,7 +143,8 @@ def plot_table(table: dict, path: str | Path) -> Path:
     ax.set_ylim(0, max(1.0, ax.get_ylim()[1]))
     ax.set_xticks(np.arange(len(groups)), [f"{s}\n{p} tasks" for s, p in groups])
     ax.set_ylabel("oracle episode reward (of 100)")
-    ax.set_title(f"Table 2: multi-task policies ({table['schedule']} schedule, {table['tower']} tower)")
+    view = f", {table['image_view']} frames" if "image_view" in table else ""
+    ax.set_title(f"Table 2: multi-task policies ({table['schedule']} schedule, {table['tower']} tower{view})")
     # Below the axes: inside, it would hide the bars.
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3, frameon=False)
     ax.grid(axis="y", alpha=0.3)

@@ -153,6 +153,7 @@ class EvalMultitask:
         table = evaluate_policies(policies, vlm, splits, self.seeds, cache=cache)
         mean, se = mean_se(data.episode_rewards)
         table.update(schedule=summary["schedule"], tower=summary["tower"],
+                     **({"image_view": summary.get("image_view", "colour")} if set(policies) - {"grounded"} else {}),
                      oracle_task_policies={"mean": mean, "se": se, "episodes": len(data.episode_rewards),
                                            "tasks": len(data.goals)},
                      meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
@@ -165,7 +166,7 @@ class EvalMultitask:
         return {"seeds": self.seeds, "tasks_per_split": len(splits["train"]), "spreads": ["seen", "unseen"],
                 "epochs": summary["epochs"], "pretrained": summary["pretrained"], "vlm": summary["vlm"],
                 "text_embedding": summary["text_embedding"], "distilled_tasks": summary["goals"],
-                **{k: summary[k] for k in ("keypoint_view", "image_view") if k in summary},
+                **({"keypoint_view": summary["keypoint_view"]} if "keypoint_view" in summary else {}),
                 "primitive_mapping_test": mapping,
                 "metric": "oracle episode reward: control steps of 100 in the goal relation; mean and s.e. over "
                           "all episodes of the split (seeds x tasks)",

@@ -26,13 +26,17 @@ from zsrm.vlm.files import read_json, write_json
 from zsrm.vlm.optim import load_optimizer, read_checkpoint_state, save_checkpoint
 from zsrm.vlm.registry import load_weights
 
-SCHEDULES = {"cpu": {"tower": "scene", "epochs": 10}, "paper": {"tower": "resnet18", "epochs": 300}}
+# cpu reads grey frames: the scene VLM's trunk, pretrained on which colours are present, gives features
+# so colour-bound that, read in colour, none of the paper's three follows a colour it never saw
+# (results/multitask/table2_view_colour.json); the paper reads colour through ImageNet's ResNet18.
+SCHEDULES = {"cpu": {"tower": "scene", "epochs": 10, "image_view": "grey"},
+             "paper": {"tower": "resnet18", "epochs": 300, "image_view": "colour"}}
 
 
 @dataclass
 class DistillConfig:
     schedule: Literal["cpu", "paper"] = "cpu"
-    """cpu: the scene VLM's image trunk, 10 epochs; paper: ResNet18, 300 epochs"""
+    """cpu: the scene VLM's image trunk on grey frames, 10 epochs; paper: ResNet18 on colour frames, 300 epochs"""
     tower: Literal["scene", "resnet18"] | None = None
     """image tower (default: the schedule's)"""
     epochs: int | None = None
@@ -48,10 +52,9 @@ class DistillConfig:
     keypoint_view: Literal["colour", "grey", "shape", "none"] = "none"
     """what the grounded policy's own keypoints look at: the frames, grey frames, grey frames with every
     coloured object one grey (through a trunk copy that trains), or nothing (results/multitask/table2_grounded*)"""
-    image_view: Literal["colour", "grey", "shape"] = "colour"
-    """what the paper's three policies' image tower reads: the frames (as the paper), grey frames, or shape
-    frames (grey, every coloured object one grey): a probe of whether colour-trained features stop them
-    following a colour never seen (results/multitask/table2_view_*)"""
+    image_view: Literal["colour", "grey", "shape"] | None = None
+    """what the paper's three policies' image tower reads (default: the schedule's): the frames in colour
+    (as the paper), in grey, or as shapes (grey, every coloured object one grey)"""
     batch_size: int = 64
     """frames per step"""
     lr: float = 1e-4
@@ -66,6 +69,7 @@ class DistillConfig:
             raise ValueError(f"unknown schedule {self.schedule!r}; choose cpu or paper")
         self.tower = self.tower or SCHEDULES[self.schedule]["tower"]
         self.epochs = int(self.epochs or SCHEDULES[self.schedule]["epochs"])
+        self.image_view = self.image_view or SCHEDULES[self.schedule]["image_view"]
         unknown = set(self.policies) - set(CONDITIONINGS)
         if unknown or not self.policies:
             raise ValueError(f"policies must be of {', '.join(CONDITIONINGS)}; got {', '.join(self.policies)}")
