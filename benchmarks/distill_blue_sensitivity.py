@@ -19,7 +19,7 @@ import torch
 
 from zsrm.envs.tabletop import BLOCK_HALF
 from zsrm.evaluation.multitask import EVAL_SEED, split_goals
-from zsrm.policy.models import embed_goals
+from zsrm.policy.models import embed_goals, view_frames
 from zsrm.policy.training import load_distilled
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.envs import make_vec
@@ -35,7 +35,7 @@ def responses(policy, embedding, env, camera: str, colour: str, rng) -> tuple[fl
     block moves one block width."""
     def read():
         frame = torch.as_tensor(env._render_camera(camera)).permute(2, 0, 1)[None]
-        keypoints = policy.encoder(frame)[0, :2 * policy.cfg.keypoints].view(-1, 2)
+        keypoints = policy.encoder(view_frames(frame, policy.cfg.keypoint_view))[0, :2 * policy.cfg.keypoints].view(-1, 2)
         return keypoints, policy.act(frame.permute(0, 2, 3, 1), embedding)[0]
 
     before_k, before_a = read()
