@@ -14,7 +14,9 @@
 
 Image towers: ``resnet18`` (torchvision's, the paper's; ImageNet weights when the user has
 them) or ``scene`` (the scene VLM's image trunk, its Grad-CAM layer, read by spatial-softmax
-keypoints as the RL policies read it). Saved as one folder: ``config.json`` (kind
+keypoints as the RL policies read it). ``keypoint_view`` sets which frames the tower reads: in
+colour (the paper's), in grey (the ``cpu`` schedule's default, :mod:`zsrm.policy.training`), or as
+shapes. Saved as one folder: ``config.json`` (kind
 ``zsrm-multitask-policy``, :class:`PolicyConfig`) and ``model.safetensors``, never pickle.
 The training tasks' text embeddings are kept in the weights (``goal_embeddings``).
 
