@@ -35,7 +35,8 @@ def responses(policy, embedding, env, camera: str, colour: str, rng) -> tuple[fl
     block moves one block width."""
     def read():
         frame = torch.as_tensor(env._render_camera(camera)).permute(2, 0, 1)[None]
-        keypoints = policy.encoder(view_frames(frame, policy.cfg.keypoint_view))[0, :2 * policy.cfg.keypoints].view(-1, 2)
+        seen = view_frames(frame, policy.cfg.keypoint_view)  # what the policy's tower reads
+        keypoints = policy.encoder(seen)[0, :2 * policy.cfg.keypoints].view(-1, 2)
         return keypoints, policy.act(frame.permute(0, 2, 3, 1), embedding)[0]
 
     before_k, before_a = read()
