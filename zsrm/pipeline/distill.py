@@ -152,8 +152,10 @@ class EvalMultitask:
             shutil.rmtree(cache, ignore_errors=True)
         table = evaluate_policies(policies, vlm, splits, self.seeds, cache=cache)
         mean, se = mean_se(data.episode_rewards)
+        # What the paper's policies read, from the policies themselves (one distill run: one view).
+        views = {p.cfg.keypoint_view for name, p in policies.items() if name != "grounded"}
         table.update(schedule=summary["schedule"], tower=summary["tower"],
-                     **({"image_view": summary.get("image_view", "colour")} if set(policies) - {"grounded"} else {}),
+                     **({"image_view": ", ".join(sorted(views))} if views else {}),
                      oracle_task_policies={"mean": mean, "se": se, "episodes": len(data.episode_rewards),
                                            "tasks": len(data.goals)},
                      meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
