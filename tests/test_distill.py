@@ -41,6 +41,16 @@ def blue_pixels(frames: np.ndarray) -> np.ndarray:
     return (b > 100) & (b - r > 60) & (b - g > 40)
 
 
+def run_benchmark(name: str, monkeypatch, *args: str) -> None:
+    """Run benchmarks/NAME as python would, with ARGS."""
+    import runpy
+    import sys
+
+    script = Path(__file__).parent.parent / "benchmarks" / name
+    monkeypatch.setattr(sys, "argv", [str(script), *args])
+    runpy.run_path(str(script), run_name="__main__")
+
+
 @pytest.fixture(scope="module")
 def pipeline(tmp_path_factory):
     """Two tiny zsrm-trained task policies, 2 rollouts each, 1 epoch of distillation, a tiny table."""
@@ -305,6 +315,7 @@ def test_tiny_end_to_end_writes_table2(pipeline):
     assert "reads grey frames" in (pipeline / "table2.md").read_text()
     assert table["oracle_task_policies"]["episodes"] == 4 and 0 <= table["oracle_task_policies"]["mean"] <= 100
     assert set(table["meta"]["primitive_mapping_test"].values()) <= set(GOALS)
+    assert table["meta"]["distill_seed"] == 0
     md = (pipeline / "table2.md").read_text()
     assert "Language Cond." in md and "Primitive Code Cond." in md and "No Conditioning" in md
     assert "Grounded Language Cond. (zsrm)" in md
@@ -390,20 +401,55 @@ def test_a_damaged_distilled_policy_is_one_line_naming_the_file(pipeline, damage
 
 
 def test_blue_sensitivity_benchmark_measures_each_moved_block(pipeline, tmp_path, monkeypatch):
-    import runpy
-    import sys
-
     out = tmp_path / "blue.json"
-    script = Path(__file__).parent.parent / "benchmarks" / "distill_blue_sensitivity.py"
-    monkeypatch.setattr(sys, "argv", [str(script), "--policies", str(pipeline / "distill"), "--scenes", "1",
-                                      "--out", str(out)])
-    runpy.run_path(str(script), run_name="__main__")
+    run_benchmark("distill_blue_sensitivity.py", monkeypatch, "--policies", str(pipeline / "distill"), "--scenes", "1",
+                  "--out", str(out))
     result = json.loads(out.read_text())
     for policy in ("language", "primitive", "none"):
         for moved in ("blue", "test_other", "train"):
             cell = result[policy][moved]
             # A block that moves a block width moves the frame, so the keypoints move.
             assert cell["keypoint_shift"]["mean"] > 0 and cell["action_change"]["mean"] >= 0
+
+
+def test_goal_probe_reads_swapped_and_other_relation_sentences(pipeline, tmp_path, monkeypatch):
+    out = tmp_path / "probe.json"
+    run_benchmark("distill_goal_probe.py", monkeypatch, "--policies", str(pipeline / "distill"), "--seeds", "1",
+                  "--tasks", "1", "--out", str(out))
+    result = json.loads(out.read_text())
+    assert set(result) >= {"language", "primitive"} and "none" not in result
+    test = result["language"]["test"]
+    # The first test goal is "a blue block on top of a red block"; the policy is scored on its scenes.
+    assert test["own"]["per_task"] == {"a blue block on top of a red block": test["own"]["per_task"][
+        "a blue block on top of a red block"]}
+    assert test["swapped"]["per_task"]["a blue block on top of a red block"]["reads"] == \
+        "a red block on top of a blue block"
+    assert test["left_of"]["per_task"]["a blue block on top of a red block"]["reads"] == \
+        "a blue block on the left of a red block"
+    for reading in ("own", "swapped", "left_of"):
+        assert test[reading]["episodes"] == 1 and 0 <= test[reading]["mean"] <= 100
+
+
+def test_table2_seeds_gives_each_seeds_gap_and_the_mean_over_seeds(pipeline, tmp_path, monkeypatch):
+    table = json.loads((pipeline / "table2.json").read_text())
+    paths = []
+    for seed, (language, primitive) in enumerate([(30.0, 25.0), (20.0, 26.0)]):
+        for policy, mean in (("language", language), ("primitive", primitive), ("none", 10.0)):
+            for spread in ("seen", "unseen"):
+                table[policy][spread]["test"] = {"mean": mean, "se": 1.0, "episodes": 900}
+        table["meta"]["distill_seed"] = seed
+        paths.append(tmp_path / f"table{seed}.json")
+        paths[-1].write_text(json.dumps(table))
+    out = tmp_path / "seeds.json"
+    run_benchmark("table2_seeds.py", monkeypatch, *map(str, paths), "--out", str(out))
+    result = json.loads(out.read_text())
+    assert result["distill_seeds"] == [0, 1]
+    gap = result["test_gaps"]["language-primitive"]["seen"]
+    assert [row["gap"] for row in gap["per_table"]] == [5.0, -6.0] and gap["holds_in"] == "1 of 2"
+    assert gap["mean"] == -0.5 and gap["se_over_seeds"] == pytest.approx(5.5)
+    assert result["language"]["unseen"]["test"]["mean"] == 25.0
+    assert result["primitive"]["seen"]["test"]["se_over_seeds"] == pytest.approx(0.5)
+    assert result["test_gaps"]["primitive-none"]["unseen"]["holds_in"] == "2 of 2"
 
 
 def test_shape_frames_paint_every_block_colour_one_grey_and_keep_the_rest_grey():

@@ -167,7 +167,8 @@ class EvalMultitask:
     def meta(self, summary: dict, splits: dict, mapping: dict | None) -> dict:
         return {"seeds": self.seeds, "tasks_per_split": len(splits["train"]), "spreads": ["seen", "unseen"],
                 "epochs": summary["epochs"], "pretrained": summary["pretrained"], "vlm": summary["vlm"],
-                "text_embedding": summary["text_embedding"], "distilled_tasks": summary["goals"],
+                "text_embedding": summary["text_embedding"], "distill_seed": summary.get("seed"),
+                "distilled_tasks": summary["goals"],
                 **({"keypoint_view": summary["keypoint_view"]} if "keypoint_view" in summary else {}),
                 "primitive_mapping_test": mapping,
                 "metric": "oracle episode reward: control steps of 100 in the goal relation; mean and s.e. over "

@@ -233,7 +233,7 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
     policies = {name: train_policy(cfg, name, data, vlm, Path(out) / name, progress, fresh)
                 for name in cfg.policies}
     summary = {"schedule": cfg.schedule, "tower": cfg.tower, "pretrained": cfg.pretrained, "epochs": cfg.epochs,
-               "vlm": cfg.vlm, "text_embedding": cfg.text_embedding,
+               "vlm": cfg.vlm, "text_embedding": cfg.text_embedding, "seed": cfg.seed,
                **({"keypoint_view": cfg.keypoint_view} if "grounded" in cfg.policies else {}),
                **({"image_view": cfg.image_view} if set(cfg.policies) - {"grounded"} else {}), "data": str(data_folder),
                "frames": len(data.actions), "goals": data.goals,

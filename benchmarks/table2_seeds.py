@@ -1,0 +1,65 @@
+"""Table 2 over distillation seeds: is language above primitive, or is it the seed?
+
+Reads tables written by ``zsrm eval-multitask`` for the same rollouts distilled with different
+``--seed`` and, per policy, spread and split, gives each seed's mean, the mean over seeds and
+its standard error across seeds (the spread a user rerunning ``zsrm distill`` would see), and
+per seed the test-task gaps language - primitive and primitive - none with the two standard
+errors added (the issue's bar).
+
+    python benchmarks/table2_seeds.py results/table2.json results/multitask/table2_seed1.json \\
+        results/multitask/table2_seed2.json results/multitask/table2_seed3.json \\
+        --out results/multitask/table2_seeds.json
+"""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from zsrm.evaluation.multitask import POLICY_NAMES, SPLITS, SPREADS
+from zsrm.vlm.files import read_json, write_json
+
+GAPS = (("language", "primitive"), ("primitive", "none"))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("tables", nargs="+", help="table2.json files, one per distillation seed")
+    parser.add_argument("--out", default="results/multitask/table2_seeds.json")
+    args = parser.parse_args()
+
+    tables = [read_json(path, "a table of zsrm eval-multitask") for path in args.tables]
+    seeds = [t["meta"].get("distill_seed") for t in tables]  # None: a table from before it was recorded
+    out: dict = {"tables": args.tables, "distill_seeds": seeds,
+                 "oracle_task_policies": [t["oracle_task_policies"]["mean"] for t in tables]}
+    for name in POLICY_NAMES:
+        having = [t for t in tables if name in t]
+        if len(having) < 2:
+            continue
+        for spread in SPREADS:
+            for split in SPLITS:
+                means = np.array([t[name][spread][split]["mean"] for t in having])
+                out.setdefault(name, {}).setdefault(spread, {})[split] = {
+                    "per_seed": means.tolist(), "mean": float(means.mean()),
+                    "se_over_seeds": float(means.std(ddof=1) / np.sqrt(len(means))), "seeds": len(means)}
+    for high, low in GAPS:
+        for spread in SPREADS:
+            rows = []
+            for path, t in zip(args.tables, tables):
+                if high in t and low in t:
+                    a, b = t[high][spread]["test"], t[low][spread]["test"]
+                    rows.append({"table": path, "gap": a["mean"] - b["mean"], "bar": a["se"] + b["se"],
+                                 "holds": a["mean"] - b["mean"] > a["se"] + b["se"]})
+            gaps = np.array([r["gap"] for r in rows])
+            out.setdefault("test_gaps", {}).setdefault(f"{high}-{low}", {})[spread] = {
+                "per_table": rows, "mean": float(gaps.mean()),
+                "se_over_seeds": float(gaps.std(ddof=1) / np.sqrt(len(gaps))) if len(gaps) > 1 else None,
+                "holds_in": f"{sum(r['holds'] for r in rows)} of {len(rows)}"}
+            print(f"test {high} - {low} ({spread}): " + ", ".join(f"{r['gap']:+.1f}" for r in rows)
+                  + f"; mean {gaps.mean():+.2f}, holds in {sum(r['holds'] for r in rows)} of {len(rows)}")
+    write_json(args.out, out)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
