@@ -35,11 +35,15 @@ def goal_camera(goal: str) -> str:
     return RELATIONS[entry.task.relation].camera
 
 
-def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen") -> DummyVecEnv:
-    """``n_envs`` scenes of the goal in one process, seeded ``seed, seed + 1, ...``."""
+def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
+             distractors: tuple[str, ...] = ()) -> DummyVecEnv:
+    """``n_envs`` scenes of the goal in one process, seeded ``seed, seed + 1, ...``; with
+    ``distractors``, colours the goal does not name are in the scene too."""
     entry = task_entry(cfg.goal)
     kwargs = dict(task=entry.goal, cameras=(goal_camera(cfg.goal),), image_size=cfg.image_size,
                   action_repeat=cfg.action_repeat)
+    if distractors:
+        kwargs["objects"] = tuple(distractors)
     if entry.env_id == PENDULUM_ID:
         if spread != "seen":
             raise ValueError(f"the pendulum has no start spread to widen (got {spread!r}); it starts as "

@@ -1,0 +1,106 @@
+"""Do the zsrm-trained task policies read which block to stack on? (What Table 2 can distil.)
+
+Each stacking task policy (``results/multitask/task_policies``) runs seeded episodes on its
+own two-block scenes and on the same scenes with the third training colour added as a
+distractor. Per episode: the steps with the goal's block on the goal's base (the oracle
+episode reward) and the steps with it on the distractor instead. The gripper starts above the
+block to move. A policy that reads its base's colour keeps its score with the distractor; one
+that stacks on whichever block is near moves points to the distractor; one the third block
+merely confuses loses points without stacking on it. Distilling policies that must read
+colours (the mechanism of the paper's Table 2) from three-block scenes needs the first kind.
+The scenes are Table 2's (``zsrm eval-multitask``'s seeds for the task).
+
+    OMP_NUM_THREADS=1 python benchmarks/task_policy_distractor.py \\
+        --out results/multitask/task_policy_distractor.json
+"""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import torch
+from stable_baselines3.common.vec_env import VecEnvWrapper
+from tqdm import tqdm
+
+from zsrm.envs.rollout import run_vec_episodes
+from zsrm.evaluation.multitask import EVAL_SEED
+from zsrm.policy.rollouts import policy_folder
+from zsrm.rl.envs import goal_camera, make_vec
+from zsrm.rl.evaluate import mean_se
+from zsrm.rl.features import VecImageFeatures
+from zsrm.rl.policy import PolicyBundle
+from zsrm.tasks.catalogue import TRAIN_COLOURS, TRAIN_TASKS
+from zsrm.tasks.relations import holds_in_world
+from zsrm.vlm import load_vlm
+from zsrm.vlm.files import write_json
+
+
+class OnDistractor(VecEnvWrapper):
+    """Counts, per env's first episode, the steps with the goal's moved block on the distractor."""
+
+    def __init__(self, venv, mover: str, distractor: str):
+        super().__init__(venv)
+        self.mover, self.distractor = mover, distractor
+        self.steps, self.running = np.zeros(venv.num_envs), np.ones(venv.num_envs, dtype=bool)
+
+    def reset(self):
+        return self.venv.reset()
+
+    def step_wait(self):
+        obs, rewards, dones, infos = self.venv.step_wait()
+        for i, info in enumerate(infos):
+            pos = info["object_positions"]
+            if self.running[i] and self.distractor in pos:
+                self.steps[i] += holds_in_world("on_top_of", [pos[self.mover], pos[self.distractor]])
+            self.running[i] &= not dones[i]
+        return obs, rewards, dones, infos
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--policies", default="results/multitask/task_policies", help="the kept task policies")
+    parser.add_argument("--episodes", type=int, default=20, help="seeded episodes per task and scene")
+    parser.add_argument("--out", default="results/multitask/task_policy_distractor.json")
+    args = parser.parse_args()
+
+    tasks = [t for t in TRAIN_TASKS if t.relation == "on_top_of"]
+    out = {"policies": args.policies, "episodes": args.episodes,
+           "metric": "control steps of 100 with the goal's moved block on its base (on_base, the oracle episode "
+                     "reward) or on the distractor (on_distractor); mean and s.e. over episodes"}
+    totals = {scene: {"on_base": [], "on_distractor": []} for scene in ("plain", "distractor")}
+    for task in tqdm(tasks, desc="task policies"):
+        bundle = PolicyBundle.load(policy_folder(args.policies, task.text))
+        vlm, (mover, base) = load_vlm(bundle.cfg.vlm), task.objects
+        third = next(c for c in TRAIN_COLOURS if c not in task.objects)
+        row = {"distractor": third}
+        for scene in ("plain", "distractor"):
+            seed = EVAL_SEED + 1000 * TRAIN_TASKS.index(task)  # Table 2's scenes of this task
+            torch.manual_seed(seed)
+            venv = OnDistractor(make_vec(bundle.cfg, args.episodes, seed, distractors=(third,) * (scene != "plain")),
+                                mover, third)
+            try:
+                result = run_vec_episodes(VecImageFeatures(venv, vlm, goal_camera(task.text)),
+                                          lambda obs: bundle.act(obs, deterministic=bundle.cfg.eval_deterministic))
+            finally:
+                venv.close()
+            row[scene] = {"on_base": float(np.mean(result["episode_rewards"])),
+                          "on_distractor": float(venv.steps.mean())}
+            totals[scene]["on_base"] += result["episode_rewards"]
+            totals[scene]["on_distractor"] += venv.steps.tolist()
+        out.setdefault("per_task", {})[task.text] = row
+        print(f"{task.text:40s} plain {row['plain']['on_base']:5.1f}, with {third}: on base "
+              f"{row['distractor']['on_base']:5.1f}, on {third} {row['distractor']['on_distractor']:5.1f}")
+    for scene, counts in totals.items():
+        out[scene] = {}
+        for key, values in counts.items():
+            mean, se = mean_se(values)
+            out[scene][key] = {"mean": mean, "se": se, "episodes": len(values)}
+    plain, mixed = out["plain"], out["distractor"]
+    print(f"all: plain {plain['on_base']['mean']:.1f}; with a distractor on base {mixed['on_base']['mean']:.1f}, "
+          f"on the distractor {mixed['on_distractor']['mean']:.1f}")
+    write_json(args.out, out)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
