@@ -60,10 +60,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--policies", default="results/multitask/task_policies", help="the kept task policies")
     parser.add_argument("--episodes", type=int, default=20, help="seeded episodes per task and scene")
+    parser.add_argument("--tasks", type=int, default=None, help="only the first N stacking tasks")
     parser.add_argument("--out", default="results/multitask/task_policy_distractor.json")
     args = parser.parse_args()
 
-    tasks = [t for t in TRAIN_TASKS if t.relation == "on_top_of"]
+    tasks = [t for t in TRAIN_TASKS if t.relation == "on_top_of"][:args.tasks]
     out = {"policies": args.policies, "episodes": args.episodes,
            "metric": "control steps of 100 with the goal's moved block on its base (on_base, the oracle episode "
                      "reward) or on the distractor (on_distractor); mean and s.e. over episodes"}
@@ -72,7 +73,7 @@ def main() -> None:
         bundle = PolicyBundle.load(policy_folder(args.policies, task.text))
         vlm, (mover, base) = load_vlm(bundle.cfg.vlm), task.objects
         third = next(c for c in TRAIN_COLOURS if c not in task.objects)
-        row = {"distractor": third}
+        row = {"third_colour": third}
         for scene in ("plain", "distractor"):
             seed = EVAL_SEED + 1000 * TRAIN_TASKS.index(task)  # Table 2's scenes of this task
             torch.manual_seed(seed)

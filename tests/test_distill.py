@@ -430,6 +430,22 @@ def test_goal_probe_reads_swapped_and_other_relation_sentences(pipeline, tmp_pat
         assert test[reading]["episodes"] == 1 and 0 <= test[reading]["mean"] <= 100
 
 
+def test_task_policy_distractor_benchmark_adds_the_third_colour(pipeline, tmp_path, monkeypatch):
+    venv = make_vec(TrainConfig(goal=GOALS[0]), 1, 0, distractors=("yellow",))
+    venv.reset()
+    assert set(venv.envs[0].unwrapped.object_positions()) == {"red", "green", "yellow"}
+    venv.close()
+    out = tmp_path / "distractor.json"
+    run_benchmark("task_policy_distractor.py", monkeypatch, "--policies", str(pipeline / "policies"), "--tasks", "1",
+                  "--episodes", "1", "--out", str(out))
+    result = json.loads(out.read_text())
+    row = result["per_task"][GOALS[0]]  # "a red block on top of a green block"
+    assert row["third_colour"] == "yellow" and row["plain"]["on_distractor"] == 0.0
+    for scene in ("plain", "distractor"):
+        assert result[scene]["on_base"]["episodes"] == 1
+        assert 0 <= row[scene]["on_base"] + row[scene]["on_distractor"] <= 100
+
+
 def test_table2_seeds_gives_each_seeds_gap_and_the_mean_over_seeds(pipeline, tmp_path, monkeypatch):
     table = json.loads((pipeline / "table2.json").read_text())
     paths = []
