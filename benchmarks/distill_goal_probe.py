@@ -24,7 +24,7 @@ import argparse
 
 from tqdm import tqdm
 
-from zsrm.evaluation.multitask import EVAL_SEED, split_goals, task_rewards
+from zsrm.evaluation.multitask import EVAL_SEED, split_goals, task_rewards, task_seed
 from zsrm.policy.models import embed_goals
 from zsrm.policy.training import load_distilled
 from zsrm.rl.evaluate import mean_se
@@ -71,7 +71,7 @@ def main() -> None:
                 for i, goal in tqdm(goals, desc=f"{name} {split} {reading}", leave=False):
                     text = readings(goal)[reading]
                     embedding = embed_goals(vlm, [text], policy.cfg.text_embedding)
-                    r = task_rewards(policy, goal, embedding, args.seeds, args.spread, EVAL_SEED + 1000 * i)
+                    r = task_rewards(policy, goal, embedding, args.seeds, args.spread, task_seed(i))
                     rewards += r
                     per_task[goal] = {"reads": text, "mean": sum(r) / len(r)}
                 mean, se = mean_se(rewards)

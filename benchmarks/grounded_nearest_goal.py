@@ -18,7 +18,7 @@ import argparse
 import torch
 from tqdm import tqdm
 
-from zsrm.evaluation.multitask import EVAL_SEED, split_goals, task_rewards
+from zsrm.evaluation.multitask import EVAL_SEED, split_goals, task_rewards, task_seed
 from zsrm.policy.models import embed_goals, load_policy
 from zsrm.rl.evaluate import mean_se
 from zsrm.vlm import load_vlm
@@ -54,7 +54,7 @@ def main() -> None:
     for name, embeddings in readings.items():
         per_task, rewards = {}, []
         for i, goal in enumerate(tqdm(test, desc=f"reads {name}")):
-            r = task_rewards(policy, goal, embeddings[i:i + 1], args.seeds, args.spread, EVAL_SEED + 1000 * i)
+            r = task_rewards(policy, goal, embeddings[i:i + 1], args.seeds, args.spread, task_seed(i))
             rewards += r
             per_task[goal] = {"reads": nearest[name][i] if name in nearest else goal, "mean": sum(r) / len(r)}
         mean, se = mean_se(rewards)

@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 from zsrm.evaluation.multitask import POLICY_NAMES, SPLITS, SPREADS
+from zsrm.rl.evaluate import mean_se
 from zsrm.vlm.files import read_json, write_json
 
 GAPS = (("language", "primitive"), ("primitive", "none"))
@@ -38,10 +37,10 @@ def main() -> None:
             continue
         for spread in SPREADS:
             for split in SPLITS:
-                means = np.array([t[name][spread][split]["mean"] for t in having])
+                means = [t[name][spread][split]["mean"] for t in having]
+                mean, se = mean_se(means)
                 out.setdefault(name, {}).setdefault(spread, {})[split] = {
-                    "per_seed": means.tolist(), "mean": float(means.mean()),
-                    "se_over_seeds": float(means.std(ddof=1) / np.sqrt(len(means))), "seeds": len(means)}
+                    "per_seed": means, "mean": mean, "se_over_seeds": se, "seeds": len(means)}
     for high, low in GAPS:
         for spread in SPREADS:
             rows = []
@@ -50,13 +49,12 @@ def main() -> None:
                     a, b = t[high][spread]["test"], t[low][spread]["test"]
                     rows.append({"table": path, "gap": a["mean"] - b["mean"], "bar": a["se"] + b["se"],
                                  "holds": a["mean"] - b["mean"] > a["se"] + b["se"]})
-            gaps = np.array([r["gap"] for r in rows])
+            mean, se = mean_se([r["gap"] for r in rows])
+            holds_in = f"{sum(r['holds'] for r in rows)} of {len(rows)}"
             out.setdefault("test_gaps", {}).setdefault(f"{high}-{low}", {})[spread] = {
-                "per_table": rows, "mean": float(gaps.mean()),
-                "se_over_seeds": float(gaps.std(ddof=1) / np.sqrt(len(gaps))) if len(gaps) > 1 else None,
-                "holds_in": f"{sum(r['holds'] for r in rows)} of {len(rows)}"}
+                "per_table": rows, "mean": mean, "se_over_seeds": se if len(rows) > 1 else None, "holds_in": holds_in}
             print(f"test {high} - {low} ({spread}): " + ", ".join(f"{r['gap']:+.1f}" for r in rows)
-                  + f"; mean {gaps.mean():+.2f}, holds in {sum(r['holds'] for r in rows)} of {len(rows)}")
+                  + f"; mean {mean:+.2f}, holds in {holds_in}")
     write_json(args.out, out)
     print(f"wrote {args.out}")
 

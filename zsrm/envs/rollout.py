@@ -70,20 +70,26 @@ def run_episode(env, policy: PolicyMaker, seed: int, max_steps: int | None = Non
     return {"success": bool(info["is_success"]), "steps_in_goal": steps_in_goal, "steps": steps}
 
 
-def run_vec_episodes(venv, act: Callable[[dict], np.ndarray], key: str = "oracle_steps") -> dict:
+def run_vec_episodes(venv, act: Callable[[dict], np.ndarray], key: str = "oracle_steps",
+                     also: tuple[str, ...] = ()) -> dict:
     """One episode in each env of a vectorised env (SB3 ``VecEnv``), all stepped together:
     ``act`` maps a batch of observations to a batch of actions. Returns each episode's oracle
     reward (the sum of ``info[key]``: by default the control steps in the goal relation; the
-    pendulum's env reward with ``key="oracle_reward"``) and whether the goal held at its end.
+    pendulum's env reward with ``key="oracle_reward"``) and whether the goal held at its end;
+    with ``also``, each episode's sum of those info keys too (under their names).
     """
     n = venv.num_envs
     obs = venv.reset()
     totals, success, running = np.zeros(n), np.zeros(n, dtype=bool), np.ones(n, dtype=bool)
+    extra = {k: np.zeros(n) for k in also}
     while running.any():
         obs, _, dones, infos = venv.step(act(obs))
         for i, info in enumerate(infos):
             if running[i]:
                 totals[i] += info.get(key, int(info["is_success"]))
+                for k in also:
+                    extra[k][i] += info[k]
                 if dones[i]:
                     success[i], running[i] = bool(info["is_success"]), False
-    return {"episode_rewards": totals.tolist(), "successes": success.tolist()}
+    return {"episode_rewards": totals.tolist(), "successes": success.tolist(),
+            **{k: v.tolist() for k, v in extra.items()}}

@@ -30,6 +30,11 @@ SPREADS = ("seen", "unseen")
 SPLITS = ("train", "test")
 
 
+def task_seed(index: int) -> int:
+    """The first scene seed of the ``index``-th goal of a split: Table 2's scenes of that goal."""
+    return EVAL_SEED + 1000 * index
+
+
 def task_rewards(policy: DistilledPolicy, goal: str, embedding: torch.Tensor, seeds: int, spread: str,
                  task_seed: int) -> list[float]:
     """Oracle episode rewards of ``seeds`` seeded episodes of one goal."""
@@ -81,7 +86,7 @@ def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[st
             cell = {}
         if cell.get("key") != key:
             embeddings = embed_goals(vlm, goals, policy.cfg.text_embedding)
-            per_task = [task_rewards(policy, goal, embeddings[i:i + 1], seeds, spread, EVAL_SEED + 1000 * i)
+            per_task = [task_rewards(policy, goal, embeddings[i:i + 1], seeds, spread, task_seed(i))
                         for i, goal in enumerate(goals)]
             mean, se = mean_se([r for rewards in per_task for r in rewards])
             cell = {"key": key, "result": {
