@@ -188,7 +188,8 @@ class MujocoPixelEnv(gym.Env):
         for _ in range(1000):
             layout = self._initial_layout()
             for colour in self.distractors:
-                layout[colour] = self._distractor_position()
+                if colour not in layout:  # a scene may lay its distractors out itself
+                    layout[colour] = self._distractor_position()
             pts = list(layout.values())
             apart = all(np.linalg.norm(a[:2] - b[:2]) > 2.6 * self.object_half_size
                         for i, a in enumerate(pts) for b in pts[i + 1:])

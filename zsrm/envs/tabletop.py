@@ -27,6 +27,10 @@ FINGERTIP_DROP = 0.08  # fingertips below the gripper origin
 # again only when it falls below GRIP_OPEN. With a plain sign test, random (and early PPO)
 # actions released a grasped block after about one step; now a grasp survives a noisy command.
 GRIP_CLOSE, GRIP_OPEN = 0.3, -0.7
+# Where a task scene's distractor starts: at the back of the table, out of the way (the base
+# class's), or in line with the goal's blocks on the far side of the moved block from its
+# base ("line", stacking goals), so a policy must tell its base from the distractor by colour.
+DISTRACTOR_PLACES = ("back", "line")
 
 
 class TabletopEnv(MujocoPixelEnv):
@@ -55,11 +59,17 @@ class TabletopEnv(MujocoPixelEnv):
 
     def __init__(self, task="stack", cameras=("front",), image_size=64, spread="seen",
                  action_mode: str | None = None, render_mode=None, objects=None, action_repeat: int = 1,
-                 start: str = "above"):
+                 start: str = "above", distractor_place: str = "back"):
         if start not in ("above", "around"):
             raise ValueError(f"unknown start {start!r}; choose 'above' or 'around'")
-        self.start = start
+        if distractor_place not in DISTRACTOR_PLACES:
+            raise ValueError(f"unknown distractor_place {distractor_place!r}; choose one of {', '.join(DISTRACTOR_PLACES)}")
+        self.start, self.distractor_place = start, distractor_place
         super().__init__(task, cameras, image_size, spread, render_mode, objects, action_repeat)
+        if distractor_place == "line":
+            if self.task is None or self.task.relation not in ("on_top_of", "below") or len(self.distractors) != 1:
+                raise ValueError("distractor_place 'line' is for a stacking goal (on top of, below) with one "
+                                 "distractor colour in objects")
         if action_mode is None:
             planar = self.task is not None and RELATIONS[self.task.relation].camera == "front"
             action_mode = "planar" if planar else "full"
@@ -87,6 +97,11 @@ class TabletopEnv(MujocoPixelEnv):
             xs, ys = [1.5 * w, -1.5 * w], [0, 0]
         elif rel == "right_of":
             xs, ys = [-1.5 * w, 1.5 * w], [0, 0]
+        elif rel in ("on_top_of", "below") and self.distractor_place == "line":
+            # the moved block in the middle: its base on one side, the distractor on the other
+            xs, ys = [0.0, side * 2.5 * w], [0, 0]
+            if rel == "below":
+                xs = xs[::-1]
         elif rel in ("on_top_of", "below"):
             xs, ys = [side * 1.5 * w, -side * 1.5 * w], [0, 0]
         elif rel == "in_between":
@@ -105,6 +120,9 @@ class TabletopEnv(MujocoPixelEnv):
             dx, dy = rng.uniform(-self.spread_width, self.spread_width, 2)
             layout[colour] = np.array([x + dx, y + (0.0 if planar else dy), TABLE_TOP + BLOCK_HALF])
         assert len(layout) == n
+        if self.distractor_place == "line":
+            dx, dy = rng.uniform(-self.spread_width, self.spread_width, 2)
+            layout[self.distractors[0]] = np.array([-side * 2.5 * w + dx, 0.0 if planar else dy, TABLE_TOP + BLOCK_HALF])
         return layout
 
     def _layout_ok(self, layout) -> bool:

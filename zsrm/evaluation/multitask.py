@@ -3,8 +3,10 @@
 Each policy runs ``seeds`` seeded episodes per task, on scenes with the seen start-state
 spread (one block width, as the task policies were trained and rolled out) and the unseen
 one (two), and is scored with the oracle episode reward (control steps of 100 in the goal
-relation). Per policy, spread and split: the mean and standard error over all the split's
-episodes. The ceiling, ``oracle_task_policies``, is the task policies' own oracle episode
+relation). Where the stacking task policies were trained and rolled out in choice scenes (a
+third block beside the moved one: the base must be found by colour), the stacking goals, the
+test ones too, are scored in choice scenes. Per policy, spread and split: the mean and
+standard error over all the split's episodes. The ceiling, ``oracle_task_policies``, is the task policies' own oracle episode
 reward over the rollouts the policies were distilled from.
 """
 from __future__ import annotations
@@ -17,7 +19,7 @@ import torch
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.policy.models import DistilledPolicy, embed_goals
-from zsrm.rl.config import TrainConfig
+from zsrm.rl.config import STACKING, TrainConfig, goal_relation
 from zsrm.rl.envs import make_vec
 from zsrm.rl.evaluate import mean_se
 from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
@@ -36,9 +38,11 @@ def task_seed(index: int) -> int:
 
 
 def task_rewards(policy: DistilledPolicy, goal: str, embedding: torch.Tensor, seeds: int, spread: str,
-                 task_seed: int) -> list[float]:
-    """Oracle episode rewards of ``seeds`` seeded episodes of one goal."""
-    cfg = TrainConfig(goal=goal, image_size=policy.cfg.image_size, action_repeat=policy.cfg.action_repeat)
+                 task_seed: int, choice: bool = False) -> list[float]:
+    """Oracle episode rewards of ``seeds`` seeded episodes of one goal; ``choice``: a stacking
+    goal's scenes are choice scenes (a third block beside the moved one, ``zsrm train --choice``)."""
+    cfg = TrainConfig(goal=goal, image_size=policy.cfg.image_size, action_repeat=policy.cfg.action_repeat,
+                      choice=choice and goal_relation(goal) in STACKING)
     venv = make_vec(cfg, seeds, task_seed, spread)
     camera = policy.cfg.camera
     if camera not in venv.observation_space.spaces:
@@ -64,8 +68,10 @@ def weights_key(policy: DistilledPolicy) -> str:
 
 
 def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[str, list[str]], seeds: int,
-                      spreads=SPREADS, progress: bool = True, cache: str | Path | None = None) -> dict:
-    """``<policy>.<spread>.<split>.{mean, se, episodes}`` and the per-task means. With ``cache``,
+                      spreads=SPREADS, progress: bool = True, cache: str | Path | None = None,
+                      choice: bool = False) -> dict:
+    """``<policy>.<spread>.<split>.{mean, se, episodes}`` and the per-task means; ``choice``: the
+    stacking goals (training and test) in choice scenes, as their task policies were. With ``cache``,
     each (policy, spread, split) cell is saved there as it finishes and reused while the policy's
     weights, the goals and the seeds are the same: a killed evaluation resumes at the first
     unfinished cell, and policies distilled at different times are scored as they come."""
@@ -78,7 +84,8 @@ def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[st
     runs = [(n, s, sp) for n in policies for s in spreads for sp in splits]
     for name, spread, split in tqdm(runs, desc="eval-multitask", disable=not progress):
         policy, goals = policies[name], splits[split]
-        key = {"weights": keys[name], "goals": goals, "seeds": seeds, "spread": spread, "eval_seed": EVAL_SEED}
+        key = {"weights": keys[name], "goals": goals, "seeds": seeds, "spread": spread, "eval_seed": EVAL_SEED,
+               **({"choice": True} if choice else {})}
         path = Path(cache) / f"{name}-{spread}-{split}.json" if cache else None
         try:
             cell = read_json(path) if path else {}
@@ -86,7 +93,7 @@ def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[st
             cell = {}
         if cell.get("key") != key:
             embeddings = embed_goals(vlm, goals, policy.cfg.text_embedding)
-            per_task = [task_rewards(policy, goal, embeddings[i:i + 1], seeds, spread, task_seed(i))
+            per_task = [task_rewards(policy, goal, embeddings[i:i + 1], seeds, spread, task_seed(i), choice)
                         for i, goal in enumerate(goals)]
             mean, se = mean_se([r for rewards in per_task for r in rewards])
             cell = {"key": key, "result": {
@@ -127,7 +134,9 @@ def table_markdown(table: dict) -> str:
               + (f" The grounded policy's own keypoints look at: {table['meta']['keypoint_view']}."
                  if "grounded" in table and "keypoint_view" in table["meta"] else "")
               + (f" The paper's policies' image tower reads {table['image_view']} frames."
-                 if "image_view" in table else "")]
+                 if "image_view" in table else "")
+              + (" Stacking goals in choice scenes (a third block beside the moved one)."
+                 if table.get("scenes") == "choice" else "")]
     return "\n".join(lines) + "\n"
 
 
@@ -148,7 +157,8 @@ def plot_table(table: dict, path: str | Path) -> Path:
     ax.set_ylim(0, max(1.0, ax.get_ylim()[1]))
     ax.set_xticks(np.arange(len(groups)), [f"{s}\n{p} tasks" for s, p in groups])
     ax.set_ylabel("oracle episode reward (of 100)")
-    view = f", {table['image_view']} frames" if "image_view" in table else ""
+    view = (f", {table['image_view']} frames" if "image_view" in table else "") + (
+        ", choice scenes" if table.get("scenes") == "choice" else "")
     ax.set_title(f"Table 2: multi-task policies ({table['schedule']} schedule, {table['tower']} tower{view})")
     # Below the axes: inside, it would hide the bars.
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3, frameon=False)

@@ -15,6 +15,7 @@ from pathlib import Path
 from zsrm.pipeline import narrow
 from zsrm.pipeline.learn import Sweep
 from zsrm.policy.training import DistillConfig
+from zsrm.rl.config import STACKING, goal_relation
 from zsrm.tasks.catalogue import TRAIN_TASKS
 from zsrm.vlm.files import check_writable
 
@@ -28,6 +29,9 @@ def kept_policies(summary: str | Path) -> Path:
 
 
 KEPT_POLICIES = str(kept_policies(POLICIES_SUMMARY))
+# The stacking tasks' policies in choice scenes (zsrm multitask-policies --choice).
+CHOICE_ROOT = "runs/multitask/policies-choice"
+CHOICE_SUMMARY = "results/multitask/choice/policies.json"
 ROLLOUTS = "data/multitask/rollouts"
 DISTILLED = "runs/multitask/distill"
 
@@ -53,14 +57,23 @@ class MultitaskPolicies:
     reward_model: str = "student"  # the zsrm reward's model folder, or student (the shipped one)
     out: str = POLICIES_SUMMARY  # the gathered summary (trials kept beside it in trials/)
     vlm: str = "scene"  # the VLM whose image trunk the policies read
+    choice: bool = False  # the stacking tasks in choice scenes (zsrm train --choice), each from its --init-root policy
+    init_root: str = KEPT_POLICIES  # with --choice: the two-block task policies to start from
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
     def run(self) -> int:
         from zsrm.policy.rollouts import keep_task_policies
 
-        sweep = Sweep(tasks=tuple(train_goals(self.tasks)), rewards=("zsrm",), seeds=(self.seed,), root=self.root,
+        goals, train, init_root = train_goals(self.tasks), self.train, None
+        if self.choice:
+            if Path(self.out) == Path(POLICIES_SUMMARY) or Path(self.root) == Path(POLICIES_ROOT):
+                raise ValueError("--choice trains other policies of the same names: give it a --root and an --out "
+                                 f"of its own (e.g. --root {CHOICE_ROOT} --out {CHOICE_SUMMARY})")
+            goals = [g for g in goals if goal_relation(g) in STACKING]
+            train, init_root = {**train, "choice": True}, self.init_root
+        sweep = Sweep(tasks=tuple(goals), rewards=("zsrm",), seeds=(self.seed,), root=self.root,
                       steps=self.steps, num_cpus=self.num_cpus, address=self.address, vlm=self.vlm,
-                      reward_model=self.reward_model, out=self.out, train=self.train)
+                      reward_model=self.reward_model, out=self.out, init_root=init_root, train=train)
         status = sweep.run()
         # Beside the kept trial summaries, as the sweep keeps them: the rollouts need the weights.
         keep = kept_policies(self.out)
@@ -78,6 +91,7 @@ class MultitaskRollouts:
     seed: int = 0  # the task policies' seed (their folder names)
     episodes: int = 50  # episodes of 100 control steps per task
     envs: int = 10  # episodes stepped together
+    choice_policies: str | None = None  # the stacking tasks' choice-scene policies instead (multitask-policies --choice)
     out: str = ROLLOUTS  # dataset folder (shards + manifest; resumes)
 
     def run(self) -> int:
@@ -85,7 +99,10 @@ class MultitaskRollouts:
 
         check_writable(self.out, folder=True)
         goals = train_goals(self.tasks)
-        folders = [str(policy_folder(self.policies, g, self.seed)) for g in goals]
+        # Each policy rolls out in the scenes it was trained in: a choice policy in choice scenes.
+        roots = [self.choice_policies if self.choice_policies and goal_relation(g) in STACKING else self.policies
+                 for g in goals]
+        folders = [str(policy_folder(root, g, self.seed)) for root, g in zip(roots, goals)]
         missing = [f for f in folders if not os.path.isdir(f)]
         if missing:
             raise FileNotFoundError(f"no task policy in {missing[0]} ({len(missing)} of {len(folders)} missing); "
@@ -150,11 +167,12 @@ class EvalMultitask:
         cache = Path(self.policies) / "eval"
         if self.fresh:
             shutil.rmtree(cache, ignore_errors=True)
-        table = evaluate_policies(policies, vlm, splits, self.seeds, cache=cache)
+        choice = bool(data.choice_goals)  # scored in the scenes the stacking tasks were rolled out in
+        table = evaluate_policies(policies, vlm, splits, self.seeds, cache=cache, choice=choice)
         mean, se = mean_se(data.episode_rewards)
         # What the paper's policies read, from the policies themselves (one distill run: one view).
         views = {p.cfg.keypoint_view for name, p in policies.items() if name != "grounded"}
-        table.update(schedule=summary["schedule"], tower=summary["tower"],
+        table.update(schedule=summary["schedule"], tower=summary["tower"], **({"scenes": "choice"} if choice else {}),
                      **({"image_view": ", ".join(sorted(views))} if views else {}),
                      oracle_task_policies={"mean": mean, "se": se, "episodes": len(data.episode_rewards),
                                            "tasks": len(data.goals)},

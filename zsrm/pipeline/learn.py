@@ -97,6 +97,7 @@ class Sweep:
     out: str = "results/rl/learning.json"  # the gathered summary; the plot beside it (.png), trials in trials/
     gather_only: bool = False  # train nothing: gather the trials finished so far (e.g. while a sweep runs)
     vlm: str = "scene"  # the VLM whose image trunk the policies read (a folder pretrained by zsrm pretrain-vlm)
+    init_root: str | None = None  # start each trial from the policy of the trial of its name under here
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
     def run(self) -> int:
@@ -111,7 +112,7 @@ class Sweep:
         out = Path(self.out)
         if not self.gather_only:
             ran = sweep(self.root, self.tasks, self.rewards, self.seeds, self.overrides(), num_cpus=self.num_cpus,
-                        address=self.address, kept=out.parent / "trials")
+                        address=self.address, kept=out.parent / "trials", init_root=self.init_root)
             print(f"ran {len(ran)} trial(s); the others were finished already")
         trials = self.trials()
         kept = keep_trial_summaries(self.root, out.parent / "trials", trials)
@@ -137,7 +138,7 @@ class Sweep:
         """The sweep's trials: name and TrainConfig (as a dict) of each."""
         from zsrm.rl.sweep import trial_grid
 
-        return trial_grid(self.tasks, self.rewards, self.seeds, self.overrides())
+        return trial_grid(self.tasks, self.rewards, self.seeds, self.overrides(), self.init_root)
 
     def meta(self, finished: int, planned: int) -> dict:
         return {"trials_finished": finished, "trials_planned": planned,

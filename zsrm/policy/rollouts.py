@@ -5,7 +5,9 @@ tasks) has its own policy trained with the zsrm reward (``zsrm multitask-policie
 rolled out for ``episodes`` seeded 100-step episodes on the scenes it was trained in (seen
 start-state spread; a task scene shows the task's two blocks only), and every decision is
 kept: the frame the policy saw (its camera, at its render size), the action it took, the goal
-sentence and the task's index. One shard per task in a :class:`~zsrm.data.shards.ShardFolder`,
+sentence and the task's index. A task policy trained in choice scenes (``--choice``: a third
+block beside the moved one, so the base is found by colour) is rolled out in them, and its
+shard says so (``choice``). One shard per task in a :class:`~zsrm.data.shards.ShardFolder`,
 so a killed collection resumes at the first unfinished task. With action repeat 2 an episode
 is 50 decisions covering 100 control steps (the paper's 5,000 steps per task = 2,500 frames).
 
@@ -158,7 +160,8 @@ def collect_task(policy: str | Path, goal: str, episodes: int, envs: int) -> tup
     arrays["task"] = np.full(len(arrays["actions"]), index, np.int16)
     arrays["goal"] = np.array([TRAIN_TASKS[index].text])
     info = {"goal": TRAIN_TASKS[index].text, "task": index, "decisions": len(arrays["task"]),
-            "episode_rewards": rewards, "camera": goal_camera(goal), "action_repeat": bundle.cfg.action_repeat}
+            "episode_rewards": rewards, "camera": goal_camera(goal), "action_repeat": bundle.cfg.action_repeat,
+            **({"choice": True} if bundle.cfg.choice else {})}
     return arrays, info
 
 
@@ -200,6 +203,11 @@ class RolloutData:
         if len(values) != 1:
             raise ValueError(f"{self.folder}: the task policies differ in {key} ({sorted(values)})")
         return values.pop()
+
+    @property
+    def choice_goals(self) -> list[str]:
+        """The tasks rolled out in choice scenes (their policies trained with ``--choice``)."""
+        return [info["goal"] for info in self.infos if info.get("choice")]
 
     @property
     def episode_rewards(self) -> list[float]:

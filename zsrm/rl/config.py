@@ -75,12 +75,20 @@ class TrainConfig:
     """tabletop tasks: the gripper starts open above the block the goal moves (above), or with its
     open fingers around it, so that closing them grasps it (around); auto: around for stacking
     goals (on top of, below), whose oracle reward stayed 0 for 300k steps from above, else above"""
+    choice: bool = False
+    """stacking goals: the scene also holds a third block (the first training colour the goal does not
+    name) in line with the goal's, on the far side of the moved block from its base, so the policy
+    must find its base by colour (the multi-task policy's choice scenes); off: the goal's blocks only"""
+    init: str = ""
+    """a trained policy folder (zsrm train's policy/) to start from instead of random weights, with
+    the same architecture (keypoints, pixels, action space); e.g. the goal's policy from the scenes
+    without a choice. A run that resumes from its checkpoint ignores it"""
     layout_version: int = field(default=0, metadata={"cli": False})
     """how the goal's scene starts its episodes (0: the scene's current version); recorded, not chosen"""
 
     # Settings added after runs were committed: written only when changed, so that a finished
     # run made before they existed still matches its configuration.
-    ADDED = {"start": "above", "layout_version": 1}
+    ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": ""}
 
     def __post_init__(self):
         if self.reward not in REWARDS:
@@ -94,6 +102,9 @@ class TrainConfig:
         if self.start not in ("auto", "above", "around"):
             raise ValueError(f"unknown start {self.start!r}; choose auto, above or around")
         relation = goal_relation(self.goal)
+        if self.choice and relation not in STACKING:
+            raise ValueError(f"--choice is for stacking goals (on top of, below): it puts a second possible "
+                             f"base beside the moved block; {self.goal!r} is not one")
         if self.start == "auto":
             self.start = "around" if relation in STACKING else "above"
         if not takes_reward(self.goal, self.reward):

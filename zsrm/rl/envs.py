@@ -11,7 +11,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 import zsrm.envs  # noqa: F401  (registers the scenes)
 from zsrm.rl.config import TrainConfig
-from zsrm.tasks.catalogue import PENDULUM_ID, TABLETOP_ID, CatalogueEntry, resolve
+from zsrm.tasks.catalogue import PENDULUM_ID, TABLETOP_ID, CatalogueEntry, choice_colour, resolve
 from zsrm.tasks.relations import RELATIONS
 
 EPISODE_STEPS = 100
@@ -38,10 +38,14 @@ def goal_camera(goal: str) -> str:
 def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
              distractors: tuple[str, ...] = ()) -> DummyVecEnv:
     """``n_envs`` scenes of the goal in one process, seeded ``seed, seed + 1, ...``; with
-    ``distractors``, colours the goal does not name are in the scene too."""
+    ``distractors``, colours the goal does not name are in the scene too (at the back of the
+    table; with ``cfg.choice``, the one distractor in line, :func:`choice_colour`'s by default)."""
     entry = task_entry(cfg.goal)
     kwargs = dict(task=entry.goal, cameras=(goal_camera(cfg.goal),), image_size=cfg.image_size,
                   action_repeat=cfg.action_repeat)
+    if cfg.choice:
+        distractors = tuple(distractors) or (choice_colour(entry.task),)
+        kwargs["distractor_place"] = "line"
     if distractors:
         kwargs["objects"] = tuple(distractors)
     if entry.env_id == PENDULUM_ID:

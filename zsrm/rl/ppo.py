@@ -143,6 +143,8 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
         extra_callbacks, extra_modules = [*extra_callbacks, aux], {**extra_modules, "inverse.safetensors": aux.model_inverse}
     if state is not None:
         state["restore"](model, extra_modules)
+    elif cfg.init:
+        start_from(model, cfg.init)
     model.set_logger(configure(str(out / "tb"), ["tensorboard"]))
     # PPO stops only at a rollout's end: train whole rollouts, never past cfg.steps.
     rollout = cfg.n_envs * cfg.n_steps * cfg.action_repeat
@@ -159,6 +161,17 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     PolicyBundle(model.policy, cfg).save(out / "policy")
     save_checkpoint(out / "checkpoint", model, cfg, callback.env_steps(), rows, extra_modules)
     return write_summary(cfg, out, final, rows, callback.env_steps())
+
+
+def start_from(model: PPO, folder: str) -> None:
+    """Copy a trained policy's weights (``--init``) into a new run's actor-critic; the optimiser
+    and the inverse-dynamics head start fresh."""
+    init = PolicyBundle.load(folder)
+    try:
+        model.policy.load_state_dict(init.policy.state_dict())
+    except RuntimeError as err:
+        raise ValueError(f"--init {folder}: that policy's architecture differs from this run's "
+                         f"({str(err).splitlines()[0][:160]})") from None
 
 
 def resolve_device(device: str) -> str:

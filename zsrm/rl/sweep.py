@@ -20,6 +20,7 @@ standard error over seeds of each run's final oracle episode reward, and the cur
 from __future__ import annotations
 
 import json
+import os
 import re
 from pathlib import Path
 
@@ -38,18 +39,21 @@ def trial_name(task: str, reward: str, seed: int) -> str:
     return f"{re.sub(r'[^A-Za-z0-9_]+', '_', task.strip())}-{reward}-{seed}"
 
 
-def trial_grid(tasks, rewards, seeds, overrides: dict | None = None) -> list[dict]:
+def trial_grid(tasks, rewards, seeds, overrides: dict | None = None, init_root: str | None = None) -> list[dict]:
     """One trial per task x reward x seed that the task takes (the pendulum takes no zsrm or vice
     reward): its name and its TrainConfig as a dict. Seed-major, so a sweep cut short has every
-    task and reward on its first seeds."""
+    task and reward on its first seeds. ``init_root``: each trial starts from the policy of the
+    trial of its name there (``<init_root>/<name>/policy``, TrainConfig's ``init``)."""
     trials = []
     for seed in seeds:
         for task in tasks:
             for reward in rewards:
                 if not takes_reward(task, reward):
                     continue
-                cfg = TrainConfig(**{**(overrides or {}), "goal": task, "reward": reward, "seed": int(seed)})
-                trials.append({"name": trial_name(task, reward, seed), "config": cfg.to_dict()})
+                name = trial_name(task, reward, seed)
+                init = {"init": str(Path(init_root) / name / "policy")} if init_root else {}
+                cfg = TrainConfig(**{**(overrides or {}), **init, "goal": task, "reward": reward, "seed": int(seed)})
+                trials.append({"name": name, "config": cfg.to_dict()})
     return trials
 
 
@@ -72,6 +76,7 @@ def run_trial(trial: dict) -> dict:
     from zsrm.rl.ppo import train
 
     torch.set_num_threads(1)
+    os.chdir(trial["cwd"])  # Ray Tune runs a trial in a folder of its own: relative paths are the sweep's
     cfg = TrainConfig.from_dict(trial["config"])
     summary = train(cfg, Path(trial["root"]) / trial["name"], progress=False,
                     on_eval=lambda row: tune.report({**row, "final": 0}))
@@ -81,7 +86,8 @@ def run_trial(trial: dict) -> dict:
 
 
 def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | None = None, num_cpus: int = 2,
-          address: str | None = None, cpus_per_trial: float = 1.0, kept: str | Path | None = None) -> list[str]:
+          address: str | None = None, cpus_per_trial: float = 1.0, kept: str | Path | None = None,
+          init_root: str | None = None) -> list[str]:
     """Run every unfinished trial of the grid on Ray Tune; returns the names that ran. A trial
     is finished when its run folder under ``root``, or its kept summary ``kept/<name>.json``
     (see :func:`keep_trial_summaries`), holds a finished run with the same settings."""
@@ -90,13 +96,13 @@ def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | None = None
 
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
-    todo = [t for t in trial_grid(tasks, rewards, seeds, overrides)
+    todo = [t for t in trial_grid(tasks, rewards, seeds, overrides, init_root)
             if not is_finished(root / t["name"], t["config"])
             and not (kept and is_finished(Path(kept) / f"{t['name']}.json", t["config"]))]
     if not todo:
         return []
     for t in todo:
-        t["root"] = str(root)
+        t["root"], t["cwd"] = str(root), os.getcwd()
     start_ray(ray, num_cpus, address)
     try:
         trainable = tune.with_resources(run_trial, {"cpu": cpus_per_trial})

@@ -68,6 +68,16 @@ TEST_TASKS: list[Task] = _multitask(
 )
 
 
+def choice_colour(task: Task) -> str:
+    """The distractor of a goal's choice scene (``zsrm train --choice``): the first training
+    colour the goal does not name, so no training task's scene shows blue.
+
+    >>> choice_colour(parse_goal("a yellow block on top of a red block"))
+    'green'
+    """
+    return next(c for c in TRAIN_COLOURS + (TEST_COLOUR,) if c not in task.objects)
+
+
 def resolve(name_or_goal: str) -> CatalogueEntry:
     """A catalogue name ("stack") or a goal sentence to the entry that runs it."""
     if name_or_goal in SINGLE_TASKS:
