@@ -10,8 +10,15 @@ merely confuses loses points without stacking on it. Distilling policies that mu
 colours (the mechanism of the paper's Table 2) from three-block scenes needs the first kind.
 The scenes are Table 2's (``zsrm eval-multitask``'s seeds for the task).
 
+With ``--choice-policies`` (``zsrm multitask-policies --choice``'s), a third scene: the choice
+scene, the third colour in line on the far side of the moved block from its base, where those
+policies were trained (from the two-block ones) and act. There a policy that reads its base's
+colour stacks on the base; one that does not, on either block about as often.
+
     OMP_NUM_THREADS=1 python benchmarks/task_policy_distractor.py \\
         --out results/multitask/task_policy_distractor.json
+    OMP_NUM_THREADS=1 python benchmarks/task_policy_distractor.py \\
+        --choice-policies results/multitask/choice/task_policies --out results/multitask/choice/task_policy_distractor.json
 """
 from __future__ import annotations
 
@@ -29,7 +36,7 @@ from zsrm.rl.envs import goal_camera, make_vec
 from zsrm.rl.evaluate import mean_se
 from zsrm.rl.features import VecImageFeatures
 from zsrm.rl.policy import PolicyBundle
-from zsrm.tasks.catalogue import TRAIN_COLOURS, TRAIN_TASKS
+from zsrm.tasks.catalogue import TRAIN_TASKS, choice_colour
 from zsrm.tasks.relations import holds_in_world
 from zsrm.vlm import load_vlm
 from zsrm.vlm.files import write_json
@@ -59,24 +66,33 @@ def main() -> None:
     parser.add_argument("--policies", default="results/multitask/task_policies", help="the kept task policies")
     parser.add_argument("--episodes", type=int, default=20, help="seeded episodes per task and scene")
     parser.add_argument("--tasks", type=int, default=None, help="only the first N stacking tasks")
+    parser.add_argument("--choice-policies", default=None,
+                        help="the stacking policies trained in choice scenes (zsrm multitask-policies --choice): "
+                             "also score them there")
     parser.add_argument("--out", default="results/multitask/task_policy_distractor.json")
     args = parser.parse_args()
 
     tasks = [t for t in TRAIN_TASKS if t.relation == "on_top_of"][:args.tasks]
     out = {"policies": args.policies, "episodes": args.episodes,
+           **({"choice_policies": args.choice_policies} if args.choice_policies else {}),
            "metric": "control steps of 100 with the goal's moved block on its base (on_base, the oracle episode "
                      "reward) or on the distractor (on_distractor); mean and s.e. over episodes"}
-    totals = {scene: {"on_base": [], "on_distractor": []} for scene in ("plain", "distractor")}
+    scenes = ("plain", "distractor", "choice") if args.choice_policies else ("plain", "distractor")
+    totals = {scene: {"on_base": [], "on_distractor": []} for scene in scenes}
     for task in tqdm(tasks, desc="task policies"):
-        bundle = PolicyBundle.load(policy_folder(args.policies, task.text))
-        vlm, mover = load_vlm(bundle.cfg.vlm), task.objects[0]
-        third = next(c for c in TRAIN_COLOURS if c not in task.objects)
+        two_block = PolicyBundle.load(policy_folder(args.policies, task.text))
+        vlm, mover = load_vlm(two_block.cfg.vlm), task.objects[0]
+        third = choice_colour(task)  # the one training colour the goal does not name
         seed = task_seed(TRAIN_TASKS.index(task))  # Table 2's scenes of this task
         row = {"third_colour": third}
-        for scene in ("plain", "distractor"):
+        for scene in scenes:
+            bundle = PolicyBundle.load(policy_folder(args.choice_policies, task.text)) if scene == "choice" \
+                else two_block
+            if scene == "choice" and not bundle.cfg.choice:
+                raise SystemExit(f"{args.choice_policies}: the policy of {task.text!r} was not trained in choice scenes")
             torch.manual_seed(seed)
-            venv = OnDistractor(make_vec(bundle.cfg, args.episodes, seed, distractors=(third,) * (scene != "plain")),
-                                mover, third)
+            distractors = (third,) if scene != "plain" else ()
+            venv = OnDistractor(make_vec(bundle.cfg, args.episodes, seed, distractors=distractors), mover, third)
             try:
                 result = run_vec_episodes(VecImageFeatures(venv, vlm, goal_camera(task.text)),
                                           lambda obs: bundle.act(obs, deterministic=bundle.cfg.eval_deterministic),
@@ -89,7 +105,9 @@ def main() -> None:
             totals[scene]["on_distractor"] += result["on_distractor"]
         out.setdefault("per_task", {})[task.text] = row
         print(f"{task.text:40s} plain {row['plain']['on_base']:5.1f}, with {third}: on base "
-              f"{row['distractor']['on_base']:5.1f}, on {third} {row['distractor']['on_distractor']:5.1f}")
+              f"{row['distractor']['on_base']:5.1f}, on {third} {row['distractor']['on_distractor']:5.1f}"
+              + (f"; choice scene: on base {row['choice']['on_base']:5.1f}, on {third} "
+                 f"{row['choice']['on_distractor']:5.1f}" if "choice" in row else ""))
     for scene, counts in totals.items():
         out[scene] = {}
         for key, values in counts.items():

@@ -16,6 +16,8 @@ from zsrm.rl.envs import make_vec
 from zsrm.rl.sweep import trial_grid
 from zsrm.tasks.catalogue import TEST_COLOUR, TRAIN_COLOURS, TRAIN_TASKS, choice_colour
 
+from test_distill import run_benchmark
+
 TINY = dict(steps=128, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, eval_every=128,
             checkpoint_every=128, keypoints=4)
 STACK = TRAIN_TASKS[0]  # a red block on top of a green block
@@ -97,7 +99,7 @@ def test_choice_policies_need_folders_of_their_own():
         MultitaskPolicies(choice=True).run()
 
 
-def test_choice_rollouts_and_table2_use_choice_scenes_for_the_stacking_tasks(tmp_path):
+def test_choice_rollouts_and_table2_use_choice_scenes_for_the_stacking_tasks(tmp_path, monkeypatch):
     two_block, choice = tmp_path / "policies", tmp_path / "choice"
     for goal in (STACK.text, PLACE.text):
         train(TrainConfig(goal=goal, reward="zsrm", **TINY), policy_folder(two_block, goal).parent, progress=False)
@@ -120,3 +122,10 @@ def test_choice_rollouts_and_table2_use_choice_scenes_for_the_stacking_tasks(tmp
     assert table["scenes"] == "choice" and "choice scenes" in (tmp_path / "table2.md").read_text()
     cell = json.loads((tmp_path / "distill" / "eval" / "language-seen-train.json").read_text())
     assert cell["key"]["choice"] is True
+    # The distractor benchmark scores the choice policy in its own scenes beside the two-block ones.
+    out = tmp_path / "distractor.json"
+    run_benchmark("task_policy_distractor.py", monkeypatch, "--policies", str(two_block), "--choice-policies",
+                  str(choice), "--tasks", "1", "--episodes", "1", "--out", str(out))
+    row = json.loads(out.read_text())["per_task"][STACK.text]
+    assert set(row) == {"third_colour", "plain", "distractor", "choice"} and row["third_colour"] == "yellow"
+    assert 0 <= row["choice"]["on_base"] + row["choice"]["on_distractor"] <= 100
