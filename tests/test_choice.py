@@ -129,3 +129,32 @@ def test_choice_rollouts_and_table2_use_choice_scenes_for_the_stacking_tasks(tmp
     row = json.loads(out.read_text())["per_task"][STACK.text]
     assert set(row) == {"third_colour", "plain", "distractor", "choice"} and row["third_colour"] == "yellow"
     assert 0 <= row["choice"]["on_base"] + row["choice"]["on_distractor"] <= 100
+
+
+def test_a_test_goals_choice_scenes_share_its_seeds_between_both_third_colours(monkeypatch):
+    import torch
+
+    import zsrm.evaluation.multitask as M
+    from zsrm.policy.models import DistilledPolicy, PolicyConfig
+    from zsrm.vlm.scene import SceneConfig
+
+    made = []
+
+    def recording_make_vec(cfg, n, seed, spread="seen", distractors=()):
+        made.append((n, seed, distractors, cfg.choice))
+        return make_vec(cfg, n, seed, spread, distractors)
+
+    monkeypatch.setattr(M, "make_vec", recording_make_vec)
+    policy = DistilledPolicy(PolicyConfig(conditioning="none", tower="scene", image_size=64, action_dim=3, text_dim=4,
+                                          goals=(STACK.text,), scene=SceneConfig(widths=(8, 8, 8), groups=4),
+                                          hidden=8, keypoints=2))
+    rewards = M.task_rewards(policy, "a red block on top of a blue block", torch.zeros(1, 4), 4, "seen", 100,
+                             choice=True)
+    assert len(rewards) == 4
+    assert made == [(2, 100, ("green",), True), (2, 102, ("yellow",), True)]
+    made.clear()
+    M.task_rewards(policy, STACK.text, torch.zeros(1, 4), 2, "seen", 100, choice=True)
+    assert made == [(2, 100, ("yellow",), True)]  # a training goal has one third colour
+    made.clear()
+    M.task_rewards(policy, PLACE.text, torch.zeros(1, 4), 2, "seen", 100, choice=True)
+    assert made == [(2, 100, (), False)]  # placing goals keep their two-block scenes

@@ -22,7 +22,8 @@ from zsrm.policy.models import DistilledPolicy, embed_goals
 from zsrm.rl.config import STACKING, TrainConfig, goal_relation
 from zsrm.rl.envs import make_vec
 from zsrm.rl.evaluate import mean_se
-from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
+from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS, choice_colours
+from zsrm.tasks.language import parse_goal
 from zsrm.vlm.files import write_json, write_text
 
 EVAL_SEED = 3_000_000  # evaluation scenes: seeds apart from the training and collection envs'
@@ -39,21 +40,30 @@ def task_seed(index: int) -> int:
 
 def task_rewards(policy: DistilledPolicy, goal: str, embedding: torch.Tensor, seeds: int, spread: str,
                  task_seed: int, choice: bool = False) -> list[float]:
-    """Oracle episode rewards of ``seeds`` seeded episodes of one goal; ``choice``: a stacking
-    goal's scenes are choice scenes (a third block beside the moved one, ``zsrm train --choice``)."""
+    """Oracle episode rewards of ``seeds`` seeded episodes of one goal. ``choice``: a stacking
+    goal's scenes are choice scenes (a third block beside the moved one, ``zsrm train --choice``);
+    a test goal's seeds are shared out between its two possible third colours, so no choice
+    favours a primitive code."""
     cfg = TrainConfig(goal=goal, image_size=policy.cfg.image_size, action_repeat=policy.cfg.action_repeat,
                       choice=choice and goal_relation(goal) in STACKING)
-    venv = make_vec(cfg, seeds, task_seed, spread)
-    camera = policy.cfg.camera
-    if camera not in venv.observation_space.spaces:
-        venv.close()
-        raise ValueError(f"the policy reads camera {camera!r}; the scenes of {goal!r} show "
-                         f"{', '.join(venv.observation_space.spaces)}")
-    embeddings = embedding.expand(seeds, -1)
-    try:
-        return run_vec_episodes(venv, lambda obs: policy.act(obs[camera], embeddings).numpy())["episode_rewards"]
-    finally:
-        venv.close()
+    groups = [(None, np.arange(seeds))]
+    if cfg.choice:  # one third colour for a training goal, two for a test goal
+        colours = choice_colours(parse_goal(goal))
+        groups = [(c, idx) for c, idx in zip(colours, np.array_split(np.arange(seeds), len(colours))) if len(idx)]
+    rewards = []
+    for colour, idx in groups:
+        venv = make_vec(cfg, len(idx), task_seed + int(idx[0]), spread, distractors=(colour,) if colour else ())
+        camera = policy.cfg.camera
+        if camera not in venv.observation_space.spaces:
+            venv.close()
+            raise ValueError(f"the policy reads camera {camera!r}; the scenes of {goal!r} show "
+                             f"{', '.join(venv.observation_space.spaces)}")
+        embeddings = embedding.expand(len(idx), -1)
+        try:
+            rewards += run_vec_episodes(venv, lambda obs: policy.act(obs[camera], embeddings).numpy())["episode_rewards"]
+        finally:
+            venv.close()
+    return rewards
 
 
 def weights_key(policy: DistilledPolicy) -> str:

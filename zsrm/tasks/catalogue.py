@@ -68,14 +68,25 @@ TEST_TASKS: list[Task] = _multitask(
 )
 
 
+def choice_colours(task: Task) -> tuple[str, ...]:
+    """The colours a goal's choice scene (``zsrm train --choice``) may hold as its third block:
+    the training colours the goal does not name (one for a training task, so none of their scenes
+    shows blue; two for a test task), else blue.
+
+    >>> choice_colours(parse_goal("a blue block on top of a red block"))
+    ('green', 'yellow')
+    """
+    return tuple(c for c in TRAIN_COLOURS if c not in task.objects) or (TEST_COLOUR,)
+
+
 def choice_colour(task: Task) -> str:
-    """The distractor of a goal's choice scene (``zsrm train --choice``): the first training
-    colour the goal does not name, so no training task's scene shows blue.
+    """The third block of a goal's choice scene when one is not given: the first of
+    :func:`choice_colours`.
 
     >>> choice_colour(parse_goal("a yellow block on top of a red block"))
     'green'
     """
-    return next(c for c in TRAIN_COLOURS + (TEST_COLOUR,) if c not in task.objects)
+    return choice_colours(task)[0]
 
 
 def resolve(name_or_goal: str) -> CatalogueEntry:
