@@ -16,7 +16,7 @@ from zsrm.rl.envs import make_vec
 from zsrm.rl.sweep import trial_grid
 from zsrm.tasks.catalogue import TEST_COLOUR, TRAIN_COLOURS, TRAIN_TASKS, choice_colour
 
-from test_distill import run_benchmark
+from test_distill import blue_pixels, run_benchmark
 
 TINY = dict(steps=128, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, eval_every=128,
             checkpoint_every=128, keypoints=4)
@@ -114,6 +114,7 @@ def test_choice_rollouts_and_table2_use_choice_scenes_for_the_stacking_tasks(tmp
     f = frames.astype(np.int16)
     yellow = (f[..., 0] > 150) & (f[..., 1] > 150) & (f[..., 2] < 90)  # the stacking task's third block
     assert yellow.reshape(len(frames), -1).sum(1).min() > 5
+    assert not blue_pixels(arrays["frames"]).any() and not any("blue" in g for g in data.goals)
     assert Distill(epochs=1, threads=1, policies=("language",), data=str(tmp_path / "rollouts"),
                    out=str(tmp_path / "distill")).run() == 0
     assert EvalMultitask(policies=str(tmp_path / "distill"), data=str(tmp_path / "rollouts"), seeds=1, tasks=1,
