@@ -26,39 +26,18 @@ import argparse
 
 import numpy as np
 import torch
-from stable_baselines3.common.vec_env import VecEnvWrapper
 from tqdm import tqdm
 
 from zsrm.envs.rollout import run_vec_episodes
-from zsrm.evaluation.multitask import task_seed
+from zsrm.evaluation.multitask import OnThirdBlock, task_seed
 from zsrm.policy.rollouts import policy_folder
 from zsrm.rl.envs import goal_camera, make_vec
 from zsrm.rl.evaluate import mean_se
 from zsrm.rl.features import VecImageFeatures
 from zsrm.rl.policy import PolicyBundle
 from zsrm.tasks.catalogue import TRAIN_TASKS, choice_colour
-from zsrm.tasks.relations import holds_in_world
 from zsrm.vlm import load_vlm
 from zsrm.vlm.files import write_json
-
-
-class OnDistractor(VecEnvWrapper):
-    """Adds ``info["on_distractor"]``: 1 while the goal's moved block is on the distractor."""
-
-    def __init__(self, venv, mover: str, distractor: str):
-        super().__init__(venv)
-        self.mover, self.distractor = mover, distractor
-
-    def reset(self):
-        return self.venv.reset()
-
-    def step_wait(self):
-        obs, rewards, dones, infos = self.venv.step_wait()
-        for info in infos:
-            pos = info["object_positions"]
-            info["on_distractor"] = int(self.distractor in pos and holds_in_world(
-                "on_top_of", [pos[self.mover], pos[self.distractor]]))
-        return obs, rewards, dones, infos
 
 
 def main() -> None:
@@ -92,17 +71,17 @@ def main() -> None:
                 raise SystemExit(f"{args.choice_policies}: the policy of {task.text!r} was not trained in choice scenes")
             torch.manual_seed(seed)
             distractors = (third,) if scene != "plain" else ()
-            venv = OnDistractor(make_vec(bundle.cfg, args.episodes, seed, distractors=distractors), mover, third)
+            venv = OnThirdBlock(make_vec(bundle.cfg, args.episodes, seed, distractors=distractors), mover, third)
             try:
                 result = run_vec_episodes(VecImageFeatures(venv, vlm, goal_camera(task.text)),
                                           lambda obs: bundle.act(obs, deterministic=bundle.cfg.eval_deterministic),
-                                          also=("on_distractor",))
+                                          also=("on_third",))
             finally:
                 venv.close()
             row[scene] = {"on_base": float(np.mean(result["episode_rewards"])),
-                          "on_distractor": float(np.mean(result["on_distractor"]))}
+                          "on_distractor": float(np.mean(result["on_third"]))}
             totals[scene]["on_base"] += result["episode_rewards"]
-            totals[scene]["on_distractor"] += result["on_distractor"]
+            totals[scene]["on_distractor"] += result["on_third"]
         out.setdefault("per_task", {})[task.text] = row
         print(f"{task.text:40s} plain {row['plain']['on_base']:5.1f}, with {third}: on base "
               f"{row['distractor']['on_base']:5.1f}, on {third} {row['distractor']['on_distractor']:5.1f}"

@@ -121,8 +121,13 @@ def test_choice_rollouts_and_table2_use_choice_scenes_for_the_stacking_tasks(tmp
                          threads=1, out=str(tmp_path / "table2.json")).run() == 0
     table = json.loads((tmp_path / "table2.json").read_text())
     assert table["scenes"] == "choice" and "choice scenes" in (tmp_path / "table2.md").read_text()
-    cell = json.loads((tmp_path / "distill" / "eval" / "language-seen-train.json").read_text())
-    assert cell["key"]["choice"] is True
+    cached = json.loads((tmp_path / "distill" / "eval" / "language-seen-train.json").read_text())
+    assert cached["key"]["choice"] is True
+    probe = tmp_path / "probe.json"
+    run_benchmark("choice_base_probe.py", monkeypatch, "--policies", str(tmp_path / "distill"), "--tasks", "1",
+                  "--seeds", "2", "--out", str(probe))
+    cell = json.loads(probe.read_text())["language"]["test"]
+    assert cell["on_base"]["episodes"] == 2 and 0 <= cell["on_base"]["mean"] + cell["on_third"]["mean"] <= 100
     # The distractor benchmark scores the choice policy in its own scenes beside the two-block ones.
     out = tmp_path / "distractor.json"
     run_benchmark("task_policy_distractor.py", monkeypatch, "--policies", str(two_block), "--choice-policies",
@@ -159,3 +164,16 @@ def test_a_test_goals_choice_scenes_share_its_seeds_between_both_third_colours(m
     made.clear()
     M.task_rewards(policy, PLACE.text, torch.zeros(1, 4), 2, "seen", 100, choice=True)
     assert made == [(2, 100, (), False)]  # placing goals keep their two-block scenes
+
+
+def test_the_third_block_counts_control_steps_with_the_moved_block_on_it():
+    from zsrm.evaluation.multitask import OnThirdBlock
+
+    venv = OnThirdBlock(make_vec(TrainConfig(goal=STACK.text, choice=True), 1, 0), "red", "yellow")
+    venv.reset()
+    env = venv.venv.envs[0].unwrapped
+    yellow = env.object_positions()["yellow"]
+    env._set_object("red", yellow + (0.0, 0.0, 0.06))  # red stacked on the third block
+    _, _, _, infos = venv.step(np.zeros((1, 3)))
+    assert venv.repeat == 2 and infos[0]["on_third"] == 2 and infos[0]["oracle_steps"] == 0
+    venv.close()

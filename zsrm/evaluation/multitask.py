@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from stable_baselines3.common.vec_env import VecEnvWrapper
+
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.policy.models import DistilledPolicy, embed_goals
@@ -24,6 +26,7 @@ from zsrm.rl.envs import make_vec
 from zsrm.rl.evaluate import mean_se
 from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS, choice_colours
 from zsrm.tasks.language import parse_goal
+from zsrm.tasks.relations import holds_in_world
 from zsrm.vlm.files import write_json, write_text
 
 EVAL_SEED = 3_000_000  # evaluation scenes: seeds apart from the training and collection envs'
@@ -38,21 +41,52 @@ def task_seed(index: int) -> int:
     return EVAL_SEED + 1000 * index
 
 
+class OnThirdBlock(VecEnvWrapper):
+    """Adds ``info["on_third"]``: the control steps (of the decision's ``action_repeat``) with the
+    goal's moved block on top of the scene's third block instead of its base; read after each
+    decision, so a stack that comes or goes within a decision counts for all of it or none."""
+
+    def __init__(self, venv, mover: str, third: str):
+        super().__init__(venv)
+        self.mover, self.third = mover, third
+        self.repeat = venv.get_attr("action_repeat")[0]
+
+    def reset(self):
+        return self.venv.reset()
+
+    def step_wait(self):
+        obs, rewards, dones, infos = self.venv.step_wait()
+        for info in infos:
+            pos = info["object_positions"]
+            info["on_third"] = self.repeat * int(self.third in pos and holds_in_world(
+                "on_top_of", [pos[self.mover], pos[self.third]]))
+        return obs, rewards, dones, infos
+
+
 def task_rewards(policy: DistilledPolicy, goal: str, embedding: torch.Tensor, seeds: int, spread: str,
                  task_seed: int, choice: bool = False) -> list[float]:
     """Oracle episode rewards of ``seeds`` seeded episodes of one goal. ``choice``: a stacking
     goal's scenes are choice scenes (a third block beside the moved one, ``zsrm train --choice``);
     a test goal's seeds are shared out between its two possible third colours, so no choice
     favours a primitive code."""
+    return task_episodes(policy, goal, embedding, seeds, spread, task_seed, choice)["episode_rewards"]
+
+
+def task_episodes(policy: DistilledPolicy, goal: str, embedding: torch.Tensor, seeds: int, spread: str,
+                  task_seed: int, choice: bool = False, wrap=None, also: tuple[str, ...] = ()) -> dict:
+    """:func:`task_rewards`'s episodes as :func:`~zsrm.envs.rollout.run_vec_episodes` returns
+    them; ``wrap(venv, colour)`` wraps each group's envs (colour: its third block, or None) to
+    add the ``also`` info keys."""
     cfg = TrainConfig(goal=goal, image_size=policy.cfg.image_size, action_repeat=policy.cfg.action_repeat,
                       choice=choice and goal_relation(goal) in STACKING)
     groups = [(None, np.arange(seeds))]
     if cfg.choice:  # one third colour for a training goal, two for a test goal
         colours = choice_colours(parse_goal(goal))
         groups = [(c, idx) for c, idx in zip(colours, np.array_split(np.arange(seeds), len(colours))) if len(idx)]
-    rewards = []
+    episodes: dict[str, list] = {}
     for colour, idx in groups:
         venv = make_vec(cfg, len(idx), task_seed + int(idx[0]), spread, distractors=(colour,) if colour else ())
+        venv = wrap(venv, colour) if wrap else venv
         camera = policy.cfg.camera
         if camera not in venv.observation_space.spaces:
             venv.close()
@@ -60,10 +94,12 @@ def task_rewards(policy: DistilledPolicy, goal: str, embedding: torch.Tensor, se
                              f"{', '.join(venv.observation_space.spaces)}")
         embeddings = embedding.expand(len(idx), -1)
         try:
-            rewards += run_vec_episodes(venv, lambda obs: policy.act(obs[camera], embeddings).numpy())["episode_rewards"]
+            result = run_vec_episodes(venv, lambda obs: policy.act(obs[camera], embeddings).numpy(), also=also)
         finally:
             venv.close()
-    return rewards
+        for k, v in result.items():
+            episodes.setdefault(k, []).extend(v)
+    return episodes
 
 
 def weights_key(policy: DistilledPolicy) -> str:
