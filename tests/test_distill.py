@@ -343,7 +343,7 @@ def test_eval_multitask_reuses_finished_cells_and_rescores_changed_ones(pipeline
     assert csv_rows[0] == "policy,spread,split,mean,se,episodes" and len(csv_rows) == 1 + 4 * 2 * 2
     assert len(list((pipeline / "distill" / "eval").glob("*.json"))) == 4 * 2 * 2
 
-    def scored(policy, goal, embedding, seeds, spread, task_seed):
+    def scored(policy, goal, embedding, seeds, spread, task_seed, choice=False):
         calls.append((goal, spread))
         return [7.0] * seeds
 
