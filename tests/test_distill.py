@@ -335,6 +335,21 @@ def test_tiny_end_to_end_writes_table2(pipeline):
     assert weights.stat().st_mtime_ns == mtime
 
 
+def test_a_finished_distillation_goes_on_to_more_epochs_as_if_asked_at_the_start(pipeline, tmp_path):
+    shutil.copytree(pipeline / "distill" / "none", tmp_path / "longer" / "none")
+    for out in ("longer", "fresh"):
+        assert Distill(epochs=2, threads=1, policies=("none",), data=str(pipeline / "rollouts"),
+                       out=str(tmp_path / out)).run() == 0
+    longer, fresh = (load_policy(tmp_path / out / "none") for out in ("longer", "fresh"))
+    log = json.loads((tmp_path / "longer" / "none" / "config.json").read_text())["training"]["log"]
+    assert [e["epoch"] for e in log] == [1, 2]
+    assert all(torch.allclose(a, b, atol=1e-6) for a, b in zip(longer.state_dict().values(),
+                                                                fresh.state_dict().values()))
+    with pytest.raises(ValueError, match="more than --epochs 1"):
+        Distill(epochs=1, threads=1, policies=("none",), data=str(pipeline / "rollouts"),
+                out=str(tmp_path / "longer")).run()
+
+
 def test_eval_multitask_reuses_finished_cells_and_rescores_changed_ones(pipeline, tmp_path, monkeypatch):
     import zsrm.evaluation.multitask as M
 

@@ -6,7 +6,8 @@ schedules: ``paper`` (ResNet18, ImageNet weights when the user has them, 300 epo
 ``cpu`` (the scene VLM's image trunk at the policies' render size, pretrained on renders of
 all four colours in the role ImageNet plays in the paper, 10 epochs). Each policy is written
 to ``OUT/<conditioning>/`` (safetensors + JSON) with its per-epoch losses; a checkpoint after
-each epoch lets a killed run resume, and a finished policy is skipped.
+each epoch lets a killed run resume, a finished policy is skipped, and a larger ``--epochs``
+goes on from where a finished run stopped.
 """
 from __future__ import annotations
 
@@ -190,6 +191,16 @@ def identity(cfg: DistillConfig, conditioning: str, data: CloningData) -> dict:
     return json.loads(json.dumps(d))
 
 
+def extendable(ckpt: Path, ident: dict) -> dict:
+    """``ident`` with the checkpoint's epoch count when that is all that differs: a run goes on to
+    more epochs, as if it had asked for them at the start (epoch k's shuffle and crops depend on k
+    alone and the learning rate is constant)."""
+    saved = read_json(ckpt / "state.json", "a checkpoint's state").get("config")
+    if isinstance(saved, dict) and "epochs" in saved and {**saved, "epochs": ident["epochs"]} == ident:
+        return {**ident, "epochs": saved["epochs"]}
+    return ident
+
+
 def train_policy(cfg: DistillConfig, conditioning: str, data: CloningData, vlm, folder: Path,
                  progress: bool = True, fresh: bool = False) -> dict:
     """Train (or resume, or skip when finished) one policy into ``folder``; its training record."""
@@ -204,7 +215,10 @@ def train_policy(cfg: DistillConfig, conditioning: str, data: CloningData, vlm, 
     opt = torch.optim.Adam(policy.parameters(), lr=cfg.lr, amsgrad=True)
     ckpt, start, log = folder / "checkpoint", 0, []
     if not fresh and (ckpt / "state.json").is_file():
-        state = read_checkpoint_state(ckpt, ident, {"epoch": int, "log": list})
+        state = read_checkpoint_state(ckpt, extendable(ckpt, ident), {"epoch": int, "log": list})
+        if state["epoch"] > cfg.epochs:
+            raise ValueError(f"the checkpoint in {ckpt} has {state['epoch']} epochs, more than --epochs "
+                             f"{cfg.epochs}; pass --fresh to start over or use another --out")
         load_weights(policy, ckpt)
         load_optimizer(ckpt, opt)
         start, log = state["epoch"], state["log"]
