@@ -20,7 +20,7 @@ from zsrm.evaluation.multitask import EVAL_SEED, OnThirdBlock, split_goals, task
 from zsrm.policy.models import embed_goals
 from zsrm.policy.training import load_distilled
 from zsrm.envs.tabletop import TabletopEnv
-from zsrm.rl.evaluate import mean_se
+from zsrm.rl.evaluate import mean_se_cell
 from zsrm.tasks.language import parse_goal
 from zsrm.vlm import load_vlm
 from zsrm.vlm.files import write_json
@@ -56,8 +56,7 @@ def main() -> None:
                                   "on_third": sum(result["on_third"]) / args.seeds}
             cell = {}
             for key, values in (("on_base", on_base), ("on_third", on_third)):
-                mean, se = mean_se(values)
-                cell[key] = {"mean": mean, "se": se, "episodes": len(values)}
+                cell[key] = mean_se_cell(values)
             out.setdefault(name, {})[split] = {**cell, "per_task": per_task}
             print(f"{name:>9} {split:>5}: on base {cell['on_base']['mean']:5.1f} +- {cell['on_base']['se']:.1f}, "
                   f"on the third block {cell['on_third']['mean']:5.1f} +- {cell['on_third']['se']:.1f}")

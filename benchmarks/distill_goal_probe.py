@@ -27,7 +27,7 @@ from tqdm import tqdm
 from zsrm.evaluation.multitask import EVAL_SEED, split_goals, task_rewards, task_seed
 from zsrm.policy.models import embed_goals
 from zsrm.policy.training import load_distilled
-from zsrm.rl.evaluate import mean_se
+from zsrm.rl.evaluate import mean_se_cell
 from zsrm.tasks.language import Task, parse_goal
 from zsrm.vlm import load_vlm
 from zsrm.vlm.files import write_json
@@ -74,8 +74,7 @@ def main() -> None:
                     r = task_rewards(policy, goal, embedding, args.seeds, args.spread, task_seed(i))
                     rewards += r
                     per_task[goal] = {"reads": text, "mean": sum(r) / len(r)}
-                mean, se = mean_se(rewards)
-                cell[reading] = {"mean": mean, "se": se, "episodes": len(rewards), "per_task": per_task}
+                cell[reading] = {**mean_se_cell(rewards), "per_task": per_task}
             print(f"{name:>9} {split:>5}: " + ", ".join(f"{k} {v['mean']:5.1f} +- {v['se']:.1f}"
                                                         for k, v in cell.items()))
     write_json(args.out, out)

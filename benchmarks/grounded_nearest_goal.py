@@ -20,7 +20,7 @@ from tqdm import tqdm
 
 from zsrm.evaluation.multitask import EVAL_SEED, split_goals, task_rewards, task_seed
 from zsrm.policy.models import embed_goals, load_policy
-from zsrm.rl.evaluate import mean_se
+from zsrm.rl.evaluate import mean_se_cell
 from zsrm.vlm import load_vlm
 from zsrm.vlm.files import write_json
 
@@ -57,8 +57,7 @@ def main() -> None:
             r = task_rewards(policy, goal, embeddings[i:i + 1], args.seeds, args.spread, task_seed(i))
             rewards += r
             per_task[goal] = {"reads": nearest[name][i] if name in nearest else goal, "mean": sum(r) / len(r)}
-        mean, se = mean_se(rewards)
-        out[name] = {"mean": mean, "se": se, "episodes": len(rewards), "per_task": per_task}
+        out[name] = {**mean_se_cell(rewards), "per_task": per_task}
         print(f"{name:>9}: {mean:6.2f} +- {se:.2f}")
     write_json(args.out, out)
 

@@ -32,7 +32,7 @@ from zsrm.envs.rollout import run_vec_episodes
 from zsrm.evaluation.multitask import OnThirdBlock, task_seed
 from zsrm.policy.rollouts import policy_folder
 from zsrm.rl.envs import goal_camera, make_vec
-from zsrm.rl.evaluate import mean_se
+from zsrm.rl.evaluate import mean_se_cell
 from zsrm.rl.features import VecImageFeatures
 from zsrm.rl.policy import PolicyBundle
 from zsrm.tasks.catalogue import TRAIN_TASKS, choice_colour
@@ -90,8 +90,7 @@ def main() -> None:
     for scene, counts in totals.items():
         out[scene] = {}
         for key, values in counts.items():
-            mean, se = mean_se(values)
-            out[scene][key] = {"mean": mean, "se": se, "episodes": len(values)}
+            out[scene][key] = mean_se_cell(values)
     plain, mixed = out["plain"], out["distractor"]
     print(f"all: plain {plain['on_base']['mean']:.1f}; with a distractor on base {mixed['on_base']['mean']:.1f}, "
           f"on the distractor {mixed['on_distractor']['mean']:.1f}")

@@ -22,8 +22,8 @@ from zsrm.envs.rollout import run_vec_episodes
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.policy.models import DistilledPolicy, embed_goals
 from zsrm.rl.config import STACKING, TrainConfig, goal_relation
-from zsrm.rl.envs import make_vec
-from zsrm.rl.evaluate import mean_se
+from zsrm.rl.envs import goal_camera, make_vec
+from zsrm.rl.evaluate import mean_se_cell
 from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS, choice_colours
 from zsrm.tasks.language import parse_goal
 from zsrm.tasks.relations import holds_in_world
@@ -83,15 +83,13 @@ def task_episodes(policy: DistilledPolicy, goal: str, embedding: torch.Tensor, s
     if cfg.choice:  # one third colour for a training goal, two for a test goal
         colours = choice_colours(parse_goal(goal))
         groups = [(c, idx) for c, idx in zip(colours, np.array_split(np.arange(seeds), len(colours))) if len(idx)]
+    camera = policy.cfg.camera
+    if camera != goal_camera(goal):  # make_vec renders the goal's camera alone
+        raise ValueError(f"the policy reads camera {camera!r}; the scenes of {goal!r} show {goal_camera(goal)}")
     episodes: dict[str, list] = {}
     for colour, idx in groups:
         venv = make_vec(cfg, len(idx), task_seed + int(idx[0]), spread, distractors=(colour,) if colour else ())
         venv = wrap(venv, colour) if wrap else venv
-        camera = policy.cfg.camera
-        if camera not in venv.observation_space.spaces:
-            venv.close()
-            raise ValueError(f"the policy reads camera {camera!r}; the scenes of {goal!r} show "
-                             f"{', '.join(venv.observation_space.spaces)}")
         embeddings = embedding.expand(len(idx), -1)
         try:
             result = run_vec_episodes(venv, lambda obs: policy.act(obs[camera], embeddings).numpy(), also=also)
@@ -141,9 +139,8 @@ def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[st
             embeddings = embed_goals(vlm, goals, policy.cfg.text_embedding)
             per_task = [task_rewards(policy, goal, embeddings[i:i + 1], seeds, spread, task_seed(i), choice)
                         for i, goal in enumerate(goals)]
-            mean, se = mean_se([r for rewards in per_task for r in rewards])
             cell = {"key": key, "result": {
-                "mean": mean, "se": se, "episodes": sum(map(len, per_task)),
+                **mean_se_cell([r for rewards in per_task for r in rewards]),
                 "per_task": {goal: float(np.mean(r)) for goal, r in zip(goals, per_task)}}}
             if path:
                 write_json(path, cell)

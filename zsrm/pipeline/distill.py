@@ -156,7 +156,7 @@ class EvalMultitask:
         from zsrm.evaluation.multitask import evaluate_policies, primitive_mapping, split_goals, write_table
         from zsrm.policy.rollouts import RolloutData
         from zsrm.policy.training import load_distilled
-        from zsrm.rl.evaluate import mean_se
+        from zsrm.rl.evaluate import mean_se_cell
         from zsrm.vlm import load_vlm
 
         check_writable(self.out)
@@ -169,13 +169,11 @@ class EvalMultitask:
             shutil.rmtree(cache, ignore_errors=True)
         choice = bool(data.choice_goals)  # scored in the scenes the stacking tasks were rolled out in
         table = evaluate_policies(policies, vlm, splits, self.seeds, cache=cache, choice=choice)
-        mean, se = mean_se(data.episode_rewards)
         # What the paper's policies read, from the policies themselves (one distill run: one view).
         views = {p.cfg.keypoint_view for name, p in policies.items() if name != "grounded"}
         table.update(schedule=summary["schedule"], tower=summary["tower"], **({"scenes": "choice"} if choice else {}),
                      **({"image_view": ", ".join(sorted(views))} if views else {}),
-                     oracle_task_policies={"mean": mean, "se": se, "episodes": len(data.episode_rewards),
-                                           "tasks": len(data.goals)},
+                     oracle_task_policies={**mean_se_cell(data.episode_rewards), "tasks": len(data.goals)},
                      meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
                                     if "primitive" in policies else None))
         for path in write_table(table, self.out):

@@ -36,6 +36,12 @@ def mean_se(values) -> tuple[float, float]:
     return float(v.mean()), float(se)
 
 
+def mean_se_cell(values) -> dict:
+    """``{"mean", "se", "episodes"}`` of one table cell's episode values."""
+    mean, se = mean_se(values)
+    return {"mean": mean, "se": se, "episodes": len(values)}
+
+
 def evaluate(act, cfg: TrainConfig, episodes: int, seed: int, spread: str = "seen", wrap=None) -> dict:
     """Mean and standard error of the oracle episode reward over ``episodes`` seeded episodes,
     one env each. ``wrap`` turns the image VecEnv into what ``act`` reads (e.g.
