@@ -54,9 +54,7 @@ def main() -> None:
                 on_third += result["on_third"]
                 per_task[goal] = {"on_base": sum(result["episode_rewards"]) / args.seeds,
                                   "on_third": sum(result["on_third"]) / args.seeds}
-            cell = {}
-            for key, values in (("on_base", on_base), ("on_third", on_third)):
-                cell[key] = mean_se_cell(values)
+            cell = {"on_base": mean_se_cell(on_base), "on_third": mean_se_cell(on_third)}
             out.setdefault(name, {})[split] = {**cell, "per_task": per_task}
             print(f"{name:>9} {split:>5}: on base {cell['on_base']['mean']:5.1f} +- {cell['on_base']['se']:.1f}, "
                   f"on the third block {cell['on_third']['mean']:5.1f} +- {cell['on_third']['se']:.1f}")

@@ -53,6 +53,9 @@ class DistillConfig:
     keypoint_view: Literal["colour", "grey", "shape", "none"] = "none"
     """what the grounded policy's own keypoints look at: the frames, grey frames, grey frames with every
     coloured object one grey (through a trunk copy that trains), or nothing (results/multitask/table2_grounded*)"""
+    centre_text: bool = False
+    """language policy: centre and scale the goal embeddings by the training goals' (their sentence
+    embeddings differ by a few hundredths per dimension, one-hot codes by 1)"""
     image_view: Literal["colour", "grey", "shape"] | None = None
     """what the paper's three policies' image tower reads (default: the schedule's): the frames in colour
     (as the paper), in grey, or as shapes (grey, every coloured object one grey)"""
@@ -152,7 +155,8 @@ def build_policy(cfg: DistillConfig, conditioning: str, data: CloningData, vlm) 
                         action_dim=int(data.actions.shape[1]), text_dim=int(data.embeddings[kind].shape[1]),
                         goals=tuple(data.goals), scene=vlm.config if cfg.tower == "scene" else None, vlm=cfg.vlm,
                         text_embedding=kind, camera=data.camera, action_repeat=data.action_repeat,
-                        keypoint_view=cfg.keypoint_view if conditioning == "grounded" else cfg.image_view)
+                        keypoint_view=cfg.keypoint_view if conditioning == "grounded" else cfg.image_view,
+                        centre_text=cfg.centre_text and conditioning == "language")
     torch.manual_seed(cfg.seed)
     policy = DistilledPolicy(pcfg, pretrained=cfg.pretrained and cfg.tower == "resnet18")
     if cfg.tower == "scene" and cfg.pretrained:
@@ -188,6 +192,8 @@ def identity(cfg: DistillConfig, conditioning: str, data: CloningData) -> dict:
         d.pop("keypoint_view")
     if conditioning == "grounded" or cfg.image_view == "colour":  # as before image_view existed
         d.pop("image_view")
+    if conditioning != "language" or not cfg.centre_text:  # as before centre_text existed
+        d.pop("centre_text")
     return json.loads(json.dumps(d))
 
 
@@ -248,6 +254,7 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
                 for name in cfg.policies}
     summary = {"schedule": cfg.schedule, "tower": cfg.tower, "pretrained": cfg.pretrained, "epochs": cfg.epochs,
                "vlm": cfg.vlm, "text_embedding": cfg.text_embedding, "seed": cfg.seed,
+               **({"centre_text": True} if cfg.centre_text and "language" in cfg.policies else {}),
                **({"keypoint_view": cfg.keypoint_view} if "grounded" in cfg.policies else {}),
                **({"image_view": cfg.image_view} if set(cfg.policies) - {"grounded"} else {}), "data": str(data_folder),
                "frames": len(data.actions), "goals": data.goals,
