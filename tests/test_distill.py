@@ -208,6 +208,27 @@ def test_the_grounded_policy_gives_one_action_per_frame_and_keeps_the_vlm_frozen
                      goals=goals, keypoint_view="none")
 
 
+def test_centred_goal_embeddings_keep_the_geometry_at_the_scale_of_one_hot_codes(tmp_path):
+    cfg = PolicyConfig(conditioning="language", tower="scene", image_size=64, action_dim=3, text_dim=8,
+                       goals=tuple(GOALS + ["a green block on top of a red block"]), scene=SMALL_SCENE, hidden=16,
+                       keypoints=4, centre_text=True)
+    policy = DistilledPolicy(cfg)
+    raw = 1.0 + 0.01 * torch.randn(3, 8, generator=torch.Generator().manual_seed(0))  # cosines ~0.99
+    policy.goal_embeddings.copy_(raw)
+    centred = policy.centred(raw)
+    assert torch.allclose(centred.mean(dim=0), torch.zeros(8), atol=1e-5)
+    assert torch.isclose(centred.pow(2).sum(dim=1).mean(), torch.tensor(1.0))
+    pairs = ~torch.eye(3, dtype=torch.bool)
+    ratio = torch.cdist(centred, centred)[pairs] / torch.cdist(raw, raw)[pairs]
+    assert torch.allclose(ratio, ratio[0])  # one scale: distances keep their proportions
+    save_policy(policy, tmp_path / "p")
+    again = load_policy(tmp_path / "p")
+    assert again.cfg.centre_text and torch.allclose(again(torch.zeros(2, 3, 64, 64, dtype=torch.uint8), raw[:2]),
+                                                    policy(torch.zeros(2, 3, 64, 64, dtype=torch.uint8), raw[:2]))
+    with pytest.raises(ValueError, match="only the language policy"):
+        PolicyConfig(**{**vars(cfg), "conditioning": "primitive"})
+
+
 def test_distill_refuses_a_grounded_policy_it_cannot_build():
     for bad in ({"tower": "resnet18"}, {"pretrained": False}, {"keypoint_view": "sepia"}):
         with pytest.raises(ValueError, match="grounded|keypoint view"):
