@@ -178,6 +178,8 @@ def table_markdown(table: dict) -> str:
                  if "grounded" in table and "keypoint_view" in table["meta"] else "")
               + (f" The paper's policies' image tower reads {table['image_view']} frames."
                  if "image_view" in table else "")
+              + (" The language policy reads its goal embeddings centred and scaled (`--centre-text`)."
+                 if table.get("language_text") == "centred" else "")
               + (" Stacking goals in choice scenes (a third block beside the moved one)."
                  if table.get("scenes") == "choice" else "")]
     return "\n".join(lines) + "\n"

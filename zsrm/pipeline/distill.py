@@ -173,6 +173,8 @@ class EvalMultitask:
         views = {p.cfg.keypoint_view for name, p in policies.items() if name != "grounded"}
         table.update(schedule=summary["schedule"], tower=summary["tower"], **({"scenes": "choice"} if choice else {}),
                      **({"image_view": ", ".join(sorted(views))} if views else {}),
+                     **({"language_text": "centred"} if "language" in policies and
+                        policies["language"].cfg.centre_text else {}),
                      oracle_task_policies={**mean_se_cell(data.episode_rewards), "tasks": len(data.goals)},
                      meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
                                     if "primitive" in policies else None))
