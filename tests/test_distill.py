@@ -371,6 +371,18 @@ def test_a_finished_distillation_goes_on_to_more_epochs_as_if_asked_at_the_start
                 out=str(tmp_path / "longer")).run()
 
 
+def test_the_table_says_when_the_language_policy_read_centred_embeddings(pipeline, tmp_path):
+    assert "language_text" not in json.loads((pipeline / "table2.json").read_text())
+    assert Distill(epochs=1, threads=1, policies=("language",), centre_text=True, data=str(pipeline / "rollouts"),
+                   out=str(tmp_path / "distill")).run() == 0
+    assert load_policy(tmp_path / "distill" / "language").cfg.centre_text
+    assert json.loads((tmp_path / "distill" / "distill.json").read_text())["centre_text"] is True
+    assert EvalMultitask(policies=str(tmp_path / "distill"), data=str(pipeline / "rollouts"), seeds=1, tasks=1,
+                         threads=1, out=str(tmp_path / "table2.json")).run() == 0
+    assert json.loads((tmp_path / "table2.json").read_text())["language_text"] == "centred"
+    assert "goal embeddings centred and scaled" in (tmp_path / "table2.md").read_text()
+
+
 def test_eval_multitask_reuses_finished_cells_and_rescores_changed_ones(pipeline, tmp_path, monkeypatch):
     import zsrm.evaluation.multitask as M
 
