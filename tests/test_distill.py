@@ -229,6 +229,30 @@ def test_centred_goal_embeddings_keep_the_geometry_at_the_scale_of_one_hot_codes
         PolicyConfig(**{**vars(cfg), "conditioning": "primitive"})
 
 
+def test_span_projection_keeps_training_goals_and_drops_what_they_do_not_span():
+    goals = tuple(GOALS + ["a green block on top of a red block"])
+    cfg = PolicyConfig(conditioning="language", tower="scene", image_size=64, action_dim=3, text_dim=8,
+                       goals=goals, scene=SMALL_SCENE, hidden=16, keypoints=4, text_span=True)
+    policy = DistilledPolicy(cfg)
+    train = torch.randn(3, 8, generator=torch.Generator().manual_seed(0))
+    policy.goal_embeddings.copy_(train)
+    assert torch.allclose(policy.in_goal_span(train), train, atol=1e-5)
+    # A goal off the training goals' (affine, 2-d) span: its projection is the point of the span it
+    # is nearest to, and the policy acts on it as on that point.
+    mean, along = train.mean(dim=0), 0.3 * (train[1] - train[0]) - 0.2 * (train[2] - train[0])
+    off = torch.linalg.svd((train - mean), full_matrices=False)[2][2:]  # orthonormal, and orthogonal to the span
+    goal = mean + along + off[:3].sum(dim=0)
+    assert torch.allclose(policy.in_goal_span(goal[None]), (mean + along)[None], atol=1e-5)
+    frames = torch.zeros(1, 64, 64, 3, dtype=torch.uint8)
+    assert torch.allclose(policy.act(frames, goal[None]), policy.act(frames, (mean + along)[None]), atol=1e-6)
+    plain = DistilledPolicy(PolicyConfig(**{**vars(cfg), "text_span": False}))
+    plain.load_state_dict(policy.state_dict())
+    assert torch.allclose(plain.act(frames, train[1:2]), policy.act(frames, train[1:2]), atol=1e-6)
+    assert not torch.allclose(plain.act(frames, goal[None]), policy.act(frames, goal[None]), atol=1e-6)
+    with pytest.raises(ValueError, match="only the language policy"):
+        PolicyConfig(**{**vars(cfg), "conditioning": "primitive"})
+
+
 def test_distill_refuses_a_grounded_policy_it_cannot_build():
     for bad in ({"tower": "resnet18"}, {"pretrained": False}, {"keypoint_view": "sepia"}):
         with pytest.raises(ValueError, match="grounded|keypoint view"):
@@ -381,6 +405,35 @@ def test_the_table_says_when_the_language_policy_read_centred_embeddings(pipelin
                          threads=1, out=str(tmp_path / "table2.json")).run() == 0
     assert json.loads((tmp_path / "table2.json").read_text())["language_text"] == "centred"
     assert "goal embeddings centred and scaled" in (tmp_path / "table2.md").read_text()
+
+
+def test_eval_multitask_text_span_scores_the_language_policy_again_and_says_so(pipeline, tmp_path, monkeypatch):
+    import zsrm.evaluation.multitask as M
+
+    shutil.copytree(pipeline / "distill", tmp_path / "distill")
+    calls = []
+
+    def scored(policy, goal, embedding, seeds, spread, task_seed, choice=False):
+        calls.append(policy.cfg.conditioning)
+        assert policy.cfg.text_span == (policy.cfg.conditioning == "language")
+        return [3.0] * seeds
+
+    monkeypatch.setattr(M, "task_rewards", scored)
+    out = tmp_path / "table2.json"
+    assert EvalMultitask(policies=str(tmp_path / "distill"), data=str(pipeline / "rollouts"), seeds=2, tasks=2,
+                         threads=1, text_span=True, out=str(out)).run() == 0
+    table = json.loads(out.read_text())
+    assert set(calls) == {"language"} and len(calls) == 2 * 2 * 2  # the other policies' cells are reused
+    assert table["language_text"] == "span" and table["language"]["seen"]["test"]["mean"] == 3.0
+    assert table["meta"]["command"].endswith("--text-span --out " + str(out))
+    assert "projected onto the training goals' span" in out.with_suffix(".md").read_text()
+    summary = json.loads((pipeline / "distill" / "distill.json").read_text())
+    shutil.copytree(pipeline / "distill" / "none", tmp_path / "none-only" / "none")
+    (tmp_path / "none-only" / "distill.json").write_text(
+        json.dumps({**summary, "policies": {"none": summary["policies"]["none"]}}))
+    with pytest.raises(ValueError, match="has none"):
+        EvalMultitask(policies=str(tmp_path / "none-only"), data=str(pipeline / "rollouts"), seeds=2, tasks=2,
+                      threads=1, text_span=True, out=str(tmp_path / "t.json")).run()
 
 
 def test_eval_multitask_reuses_finished_cells_and_rescores_changed_ones(pipeline, tmp_path, monkeypatch):

@@ -129,7 +129,7 @@ def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[st
     for name, spread, split in tqdm(runs, desc="eval-multitask", disable=not progress):
         policy, goals = policies[name], splits[split]
         key = {"weights": keys[name], "goals": goals, "seeds": seeds, "spread": spread, "eval_seed": EVAL_SEED,
-               **({"choice": True} if choice else {})}
+               **({"choice": True} if choice else {}), **({"text_span": True} if policy.cfg.text_span else {})}
         path = Path(cache) / f"{name}-{spread}-{split}.json" if cache else None
         try:
             cell = read_json(path) if path else {}
@@ -179,7 +179,9 @@ def table_markdown(table: dict) -> str:
               + (f" The paper's policies' image tower reads {table['image_view']} frames."
                  if "image_view" in table else "")
               + (" The language policy reads its goal embeddings centred and scaled (`--centre-text`)."
-                 if table.get("language_text") == "centred" else "")
+                 if "centred" in table.get("language_text", "") else "")
+              + (" The language policy reads each goal's embedding projected onto the training goals' span "
+                 "(`--text-span`)." if "span" in table.get("language_text", "") else "")
               + (" Stacking goals in choice scenes (a third block beside the moved one)."
                  if table.get("scenes") == "choice" else "")]
     return "\n".join(lines) + "\n"

@@ -136,6 +136,13 @@ class Distill(DistillConfig):
         return 0
 
 
+def language_text(policies: dict) -> dict:
+    """How the language policy reads its goal embeddings, for the table (nothing when raw)."""
+    cfg = policies["language"].cfg if "language" in policies else None
+    how = [word for word, on in (("centred", cfg and cfg.centre_text), ("span", cfg and cfg.text_span)) if on]
+    return {"language_text": ", ".join(how)} if how else {}
+
+
 @dataclass
 class EvalMultitask:
     """Table 2: the distilled policies on the training and test tasks, seen and unseen start spread."""
@@ -146,6 +153,7 @@ class EvalMultitask:
     tasks: int | None = None  # only the first N training and N test tasks (default: all 18 and 18)
     out: str = "results/table2.json"  # the table; .md and .png beside it
     threads: int = 2  # torch threads
+    text_span: bool = False  # the language policy reads each goal's embedding projected onto the training goals' span
     fresh: bool = False  # score every cell again instead of reusing those saved under POLICIES/eval/
 
     def run(self) -> int:
@@ -162,6 +170,10 @@ class EvalMultitask:
         check_writable(self.out)
         torch.set_num_threads(self.threads)
         summary, policies = load_distilled(self.policies)
+        if self.text_span:
+            if "language" not in policies:
+                raise ValueError(f"--text-span is the language policy's; {self.policies} has none")
+            policies["language"].cfg.text_span = True
         data, vlm = RolloutData(self.data), load_vlm(summary["vlm"])
         splits = split_goals(self.tasks)
         cache = Path(self.policies) / "eval"
@@ -173,8 +185,7 @@ class EvalMultitask:
         views = {p.cfg.keypoint_view for name, p in policies.items() if name != "grounded"}
         table.update(schedule=summary["schedule"], tower=summary["tower"], **({"scenes": "choice"} if choice else {}),
                      **({"image_view": ", ".join(sorted(views))} if views else {}),
-                     **({"language_text": "centred"} if "language" in policies and
-                        policies["language"].cfg.centre_text else {}),
+                     **language_text(policies),
                      oracle_task_policies={**mean_se_cell(data.episode_rewards), "tasks": len(data.goals)},
                      meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
                                     if "primitive" in policies else None))
@@ -192,5 +203,6 @@ class EvalMultitask:
                 "metric": "oracle episode reward: control steps of 100 in the goal relation; mean and s.e. over "
                           "all episodes of the split (seeds x tasks)",
                 "command": f"zsrm eval-multitask --policies {self.policies} --data {self.data} --seeds {self.seeds}"
-                           + (f" --tasks {self.tasks}" if self.tasks else "") + f" --out {self.out}",
+                           + (f" --tasks {self.tasks}" if self.tasks else "")
+                           + (" --text-span" if self.text_span else "") + f" --out {self.out}",
                 "machine": f"{platform.machine()}, {os.cpu_count()} cores"}
