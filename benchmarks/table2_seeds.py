@@ -9,6 +9,11 @@ errors added (the issue's bar).
     python benchmarks/table2_seeds.py results/table2.json results/multitask/table2_seed1.json \\
         results/multitask/table2_seed2.json results/multitask/table2_seed3.json \\
         --out results/multitask/table2_seeds.json
+
+``--language T1 T2 ...`` (one table per table above, each from the same rollouts and distillation
+seed) puts each table's language row in place of the table's own: a language policy distilled
+or scored apart (``zsrm distill --centre-text``, ``zsrm eval-multitask --text-span``) against the
+primitive and unconditioned policies of its seed.
 """
 from __future__ import annotations
 
@@ -24,6 +29,8 @@ GAPS = (("language", "primitive"), ("primitive", "none"))
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("tables", nargs="+", help="table2.json files, one per distillation seed")
+    parser.add_argument("--language", nargs="+", metavar="TABLE",
+                        help="tables whose language rows stand in for the tables' own, one per table")
     parser.add_argument("--out", default="results/multitask/table2_seeds.json")
     args = parser.parse_args()
 
@@ -31,6 +38,17 @@ def main() -> None:
     seeds = [t["meta"].get("distill_seed") for t in tables]  # None: a table from before it was recorded
     out: dict = {"tables": args.tables, "distill_seeds": seeds,
                  "oracle_task_policies": [t["oracle_task_policies"]["mean"] for t in tables]}
+    if args.language:
+        if len(args.language) != len(args.tables):
+            parser.error(f"--language takes one table per table: {len(args.tables)}, not {len(args.language)}")
+        out["language_tables"], out["language_text"] = args.language, []
+        for path, table in zip(args.language, tables):
+            other = read_json(path, "a table of zsrm eval-multitask")
+            if (other["oracle_task_policies"] != table["oracle_task_policies"]
+                    or other["meta"].get("distill_seed") != table["meta"].get("distill_seed")):
+                parser.error(f"{path} is not from the same rollouts and distillation seed as the table it stands in for")
+            table["language"] = other["language"]
+            out["language_text"].append(other.get("language_text", "raw"))
     for name in POLICY_NAMES:
         having = [t for t in tables if name in t]
         if len(having) < 2:

@@ -567,6 +567,21 @@ def test_table2_seeds_gives_each_seeds_gap_and_the_mean_over_seeds(pipeline, tmp
     assert result["language"]["unseen"]["test"]["mean"] == 25.0
     assert result["primitive"]["seen"]["test"]["se_over_seeds"] == pytest.approx(0.5)
     assert result["test_gaps"]["primitive-none"]["unseen"]["holds_in"] == "2 of 2"
+    # Language rows scored apart stand in for the tables' own, checked to be of the same data and seed.
+    apart = []
+    for seed, path in enumerate(paths):
+        other = json.loads(path.read_text())
+        other["language"]["seen"]["test"] = {"mean": 40.0, "se": 1.0, "episodes": 900}
+        other["language_text"] = "centred, span"
+        apart.append(tmp_path / f"language{seed}.json")
+        apart[-1].write_text(json.dumps(other))
+    run_benchmark("table2_seeds.py", monkeypatch, *map(str, paths), "--language", *map(str, apart), "--out", str(out))
+    result = json.loads(out.read_text())
+    assert [row["gap"] for row in result["test_gaps"]["language-primitive"]["seen"]["per_table"]] == [15.0, 14.0]
+    assert result["language_text"] == ["centred, span"] * 2
+    with pytest.raises(SystemExit):
+        run_benchmark("table2_seeds.py", monkeypatch, *map(str, paths), "--language", str(apart[1]), str(apart[0]),
+                      "--out", str(out))
 
 
 def test_shape_frames_paint_every_block_colour_one_grey_and_keep_the_rest_grey():
