@@ -44,8 +44,8 @@ def main() -> None:
         out["language_tables"], out["language_text"] = args.language, []
         for path, table in zip(args.language, tables):
             other = read_json(path, "a table of zsrm eval-multitask")
-            seeds = {other["meta"].get("distill_seed"), table["meta"].get("distill_seed")} - {None}  # None: not recorded
-            if other["oracle_task_policies"] != table["oracle_task_policies"] or len(seeds) > 1:
+            recorded = {other["meta"].get("distill_seed"), table["meta"].get("distill_seed")} - {None}
+            if other["oracle_task_policies"] != table["oracle_task_policies"] or len(recorded) > 1:
                 parser.error(f"{path} is not from the same rollouts and distillation seed as the table it stands in for")
             table["language"] = other["language"]
             out["language_text"].append(other.get("language_text", "raw"))
