@@ -6,7 +6,7 @@ its standard error across seeds (the spread a user rerunning ``zsrm distill`` wo
 per seed the test-task gaps language - primitive and primitive - none with the two standard
 errors added (the issue's bar).
 
-    python benchmarks/table2_seeds.py results/table2.json results/multitask/table2_seed1.json \\
+    python benchmarks/table2_seeds.py results/multitask/table2_seed0.json results/multitask/table2_seed1.json \\
         results/multitask/table2_seed2.json results/multitask/table2_seed3.json \\
         --out results/multitask/table2_seeds.json
 
