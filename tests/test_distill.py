@@ -1,6 +1,7 @@
 """The multi-task policy (paper 2.3, 3.3, Table 2): rollout data without blue, the nearest
 primitive code, the three policies and the grounded variant, and a tiny end to end run of the
 four commands."""
+import argparse
 import json
 import shutil
 from pathlib import Path
@@ -10,11 +11,12 @@ import numpy as np
 import pytest
 import torch
 
+from zsrm.cli.options import add_options, from_namespace
 from zsrm.pipeline.distill import Distill, EvalMultitask, MultitaskRollouts, train_goals
 from zsrm.policy.models import (SHAPE_GREY, DistilledPolicy, PolicyConfig, embed_goals, grey_frames, load_policy,
                                 resnet18, save_policy, shape_frames)
 from zsrm.policy.rollouts import RolloutData, keep_task_policies, policy_folder, train_task_index
-from zsrm.policy.training import DistillConfig, load_distilled, random_crops
+from zsrm.policy.training import DistillConfig, centres_text, load_distilled, random_crops
 from zsrm.rl import TrainConfig, train
 from zsrm.rl.envs import make_vec
 from zsrm.rl.sweep import trial_grid
@@ -395,16 +397,34 @@ def test_a_finished_distillation_goes_on_to_more_epochs_as_if_asked_at_the_start
                 out=str(tmp_path / "longer")).run()
 
 
-def test_the_table_says_when_the_language_policy_read_centred_embeddings(pipeline, tmp_path):
-    assert "language_text" not in json.loads((pipeline / "table2.json").read_text())
-    assert Distill(epochs=1, threads=1, policies=("language",), centre_text=True, data=str(pipeline / "rollouts"),
+def test_the_table_says_how_the_language_policy_read_its_goal_embeddings(pipeline, tmp_path):
+    # The cpu schedule centres them (the fixture's policies were distilled with its defaults).
+    assert load_policy(pipeline / "distill" / "language").cfg.centre_text
+    assert json.loads((pipeline / "distill" / "distill.json").read_text())["centre_text"] is True
+    assert json.loads((pipeline / "table2.json").read_text())["language_text"] == "centred"
+    assert "goal embeddings centred and scaled" in (pipeline / "table2.md").read_text()
+    assert Distill(epochs=1, threads=1, policies=("language",), centre_text=False, data=str(pipeline / "rollouts"),
                    out=str(tmp_path / "distill")).run() == 0
-    assert load_policy(tmp_path / "distill" / "language").cfg.centre_text
-    assert json.loads((tmp_path / "distill" / "distill.json").read_text())["centre_text"] is True
+    assert not load_policy(tmp_path / "distill" / "language").cfg.centre_text
+    assert "centre_text" not in json.loads((tmp_path / "distill" / "distill.json").read_text())
     assert EvalMultitask(policies=str(tmp_path / "distill"), data=str(pipeline / "rollouts"), seeds=1, tasks=1,
                          threads=1, out=str(tmp_path / "table2.json")).run() == 0
-    assert json.loads((tmp_path / "table2.json").read_text())["language_text"] == "centred"
-    assert "goal embeddings centred and scaled" in (tmp_path / "table2.md").read_text()
+    assert "language_text" not in json.loads((tmp_path / "table2.json").read_text())
+    assert "centred" not in (tmp_path / "table2.md").read_text()
+
+
+def test_centring_is_the_cpu_schedules_default_and_needs_two_goals():
+    assert DistillConfig().centre_text is True and DistillConfig(schedule="paper").centre_text is False
+    assert DistillConfig(centre_text=False).centre_text is False
+    parser = argparse.ArgumentParser()
+    add_options(parser, Distill)
+    assert from_namespace(Distill, parser.parse_args([])).centre_text is True
+    assert from_namespace(Distill, parser.parse_args(["--no-centre-text"])).centre_text is False
+    assert from_namespace(Distill, parser.parse_args(["--schedule", "paper", "--centre-text"])).centre_text is True
+    # One training goal has no spread to scale by: its policy reads the embedding raw.
+    assert centres_text(DistillConfig(), "language", tuple(t.text for t in TRAIN_TASKS[:2]))
+    assert not centres_text(DistillConfig(), "language", tuple(t.text for t in TRAIN_TASKS[:1]))
+    assert not centres_text(DistillConfig(), "primitive", tuple(t.text for t in TRAIN_TASKS[:2]))
 
 
 def test_eval_multitask_text_span_scores_the_language_policy_again_and_says_so(pipeline, tmp_path, monkeypatch):
@@ -424,7 +444,8 @@ def test_eval_multitask_text_span_scores_the_language_policy_again_and_says_so(p
                          threads=1, text_span=True, out=str(out)).run() == 0
     table = json.loads(out.read_text())
     assert set(calls) == {"language"} and len(calls) == 2 * 2 * 2  # the other policies' cells are reused
-    assert table["language_text"] == "span" and table["language"]["seen"]["test"]["mean"] == 3.0
+    # The fixture's language policy is centred (the cpu schedule's default), so it reads both.
+    assert table["language_text"] == "centred, span" and table["language"]["seen"]["test"]["mean"] == 3.0
     assert table["meta"]["command"].endswith("--text-span --out " + str(out))
     assert "projected onto the training goals' span" in out.with_suffix(".md").read_text()
     summary = json.loads((pipeline / "distill" / "distill.json").read_text())

@@ -74,8 +74,8 @@ def _argument(f: dataclasses.Field, kind, doc: str) -> tuple[list[str], dict]:
     default = f.default if f.default is not dataclasses.MISSING else (
         f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
     kw: dict = {"help": doc}
-    if kind is bool:  # a flag; --no-NAME turns off one that is on by default
-        kw["action"] = argparse.BooleanOptionalAction if default is True else "store_true"
+    if kind is bool:  # a flag; --no-NAME turns off one that is on (or, when None, set) by default
+        kw["action"] = argparse.BooleanOptionalAction if default in (True, None) else "store_true"
     elif origin is typing.Literal:
         kw["choices"] = typing.get_args(kind)
         kw["type"] = type(kw["choices"][0])

@@ -30,8 +30,8 @@ from zsrm.vlm.registry import load_weights
 # cpu reads grey frames: the scene VLM's trunk, pretrained on which colours are present, gives features
 # so colour-bound that, read in colour, none of the paper's three follows a colour it never saw
 # (results/multitask/table2_view_colour.json); the paper reads colour through ImageNet's ResNet18.
-SCHEDULES = {"cpu": {"tower": "scene", "epochs": 10, "image_view": "grey"},
-             "paper": {"tower": "resnet18", "epochs": 300, "image_view": "colour"}}
+SCHEDULES = {"cpu": {"tower": "scene", "epochs": 10, "image_view": "grey", "centre_text": True},
+             "paper": {"tower": "resnet18", "epochs": 300, "image_view": "colour", "centre_text": False}}
 
 
 @dataclass
@@ -53,9 +53,10 @@ class DistillConfig:
     keypoint_view: Literal["colour", "grey", "shape", "none"] = "none"
     """what the grounded policy's own keypoints look at: the frames, grey frames, grey frames with every
     coloured object one grey (through a trunk copy that trains), or nothing (results/multitask/table2_grounded*)"""
-    centre_text: bool = False
+    centre_text: bool | None = None
     """language policy: centre and scale the goal embeddings by the training goals' (their sentence
-    embeddings differ by a few hundredths per dimension, one-hot codes by 1)"""
+    embeddings differ by a few hundredths per dimension, one-hot codes by 1); default: the schedule's
+    (cpu centres them, results/multitask/table2_centred_seeds.json; paper feeds them raw, as the paper)"""
     image_view: Literal["colour", "grey", "shape"] | None = None
     """what the paper's three policies' image tower reads (default: the schedule's): the frames in colour
     (as the paper), in grey, or as shapes (grey, every coloured object one grey)"""
@@ -74,6 +75,8 @@ class DistillConfig:
         self.tower = self.tower or SCHEDULES[self.schedule]["tower"]
         self.epochs = int(self.epochs or SCHEDULES[self.schedule]["epochs"])
         self.image_view = self.image_view or SCHEDULES[self.schedule]["image_view"]
+        if self.centre_text is None:
+            self.centre_text = SCHEDULES[self.schedule]["centre_text"]
         unknown = set(self.policies) - set(CONDITIONINGS)
         if unknown or not self.policies:
             raise ValueError(f"policies must be of {', '.join(CONDITIONINGS)}; got {', '.join(self.policies)}")
@@ -156,7 +159,7 @@ def build_policy(cfg: DistillConfig, conditioning: str, data: CloningData, vlm) 
                         goals=tuple(data.goals), scene=vlm.config if cfg.tower == "scene" else None, vlm=cfg.vlm,
                         text_embedding=kind, camera=data.camera, action_repeat=data.action_repeat,
                         keypoint_view=cfg.keypoint_view if conditioning == "grounded" else cfg.image_view,
-                        centre_text=cfg.centre_text and conditioning == "language")
+                        centre_text=centres_text(cfg, conditioning, data.goals))
     torch.manual_seed(cfg.seed)
     policy = DistilledPolicy(pcfg, pretrained=cfg.pretrained and cfg.tower == "resnet18")
     if cfg.tower == "scene" and cfg.pretrained:
@@ -183,6 +186,12 @@ def run_epoch(policy: DistilledPolicy, opt, data: CloningData, cfg: DistillConfi
     return total / n
 
 
+def centres_text(cfg: DistillConfig, conditioning: str, goals) -> bool:
+    """Whether this policy centres its goal embeddings: only the language policy does, and only
+    over two goals or more (one goal has no spread to scale by)."""
+    return bool(cfg.centre_text) and conditioning == "language" and len(goals) > 1
+
+
 def identity(cfg: DistillConfig, conditioning: str, data: CloningData) -> dict:
     """The settings that define one policy's training (a checkpoint resumes only under them)."""
     d = {**asdict(cfg), "conditioning": conditioning, "frames": len(data.actions), "goals": data.goals}
@@ -192,7 +201,7 @@ def identity(cfg: DistillConfig, conditioning: str, data: CloningData) -> dict:
         d.pop("keypoint_view")
     if conditioning == "grounded" or cfg.image_view == "colour":  # as before image_view existed
         d.pop("image_view")
-    if conditioning != "language" or not cfg.centre_text:  # as before centre_text existed
+    if not centres_text(cfg, conditioning, data.goals):  # as before centre_text existed
         d.pop("centre_text")
     return json.loads(json.dumps(d))
 
@@ -254,7 +263,7 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
                 for name in cfg.policies}
     summary = {"schedule": cfg.schedule, "tower": cfg.tower, "pretrained": cfg.pretrained, "epochs": cfg.epochs,
                "vlm": cfg.vlm, "text_embedding": cfg.text_embedding, "seed": cfg.seed,
-               **({"centre_text": True} if cfg.centre_text and "language" in cfg.policies else {}),
+               **({"centre_text": True} if "language" in cfg.policies and centres_text(cfg, "language", data.goals) else {}),
                **({"keypoint_view": cfg.keypoint_view} if "grounded" in cfg.policies else {}),
                **({"image_view": cfg.image_view} if set(cfg.policies) - {"grounded"} else {}), "data": str(data_folder),
                "frames": len(data.actions), "goals": data.goals,
