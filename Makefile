@@ -83,6 +83,10 @@ results: setup
 		--language results/table2.json results/multitask/table2_centred_seed1.json \
 		results/multitask/table2_centred_seed2.json results/multitask/table2_centred_seed3.json \
 		--out results/multitask/table2_centred_seeds.json
+	# does the centred language policy follow the goal's colours or its relation? (stacking scenes)
+	$(PY) benchmarks/distill_goal_probe.py --policies runs/multitask/distill --out results/multitask/goal_probe_centred_seed0.json
+	$(PY) benchmarks/distill_goal_probe.py --policies runs/multitask/distill-centred-seed2 \
+		--out results/multitask/goal_probe_centred_seed2.json
 	# Table 2 in choice scenes: the stacking tasks' scenes get a third block beside the moved one
 	# (the base must be found by colour); their policies train 100k more steps there from the ones above
 	$(VENV)/bin/zsrm multitask-policies --choice --steps 100000 --root runs/multitask/policies-choice \
