@@ -1,7 +1,6 @@
 """The multi-task policy (paper 2.3, 3.3, Table 2): rollout data without blue, the nearest
 primitive code, the three policies and the grounded variant, and a tiny end to end run of the
 four commands."""
-import argparse
 import json
 import shutil
 from pathlib import Path
@@ -11,7 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from zsrm.cli.options import add_options, from_namespace
+from zsrm.cli import build_parser
+from zsrm.cli.options import from_namespace
 from zsrm.pipeline.distill import Distill, EvalMultitask, MultitaskRollouts, train_goals
 from zsrm.policy.models import (SHAPE_GREY, DistilledPolicy, PolicyConfig, embed_goals, grey_frames, load_policy,
                                 resnet18, save_policy, shape_frames)
@@ -416,11 +416,13 @@ def test_the_table_says_how_the_language_policy_read_its_goal_embeddings(pipelin
 def test_centring_is_the_cpu_schedules_default_and_needs_two_goals():
     assert DistillConfig().centre_text is True and DistillConfig(schedule="paper").centre_text is False
     assert DistillConfig(centre_text=False).centre_text is False
-    parser = argparse.ArgumentParser()
-    add_options(parser, Distill)
-    assert from_namespace(Distill, parser.parse_args([])).centre_text is True
-    assert from_namespace(Distill, parser.parse_args(["--no-centre-text"])).centre_text is False
-    assert from_namespace(Distill, parser.parse_args(["--schedule", "paper", "--centre-text"])).centre_text is True
+    def distill_command(*argv):  # as `zsrm distill ...` parses them
+        args = build_parser().parse_args(["distill", *argv])
+        return from_namespace(args.options_class, args)
+
+    assert distill_command().centre_text is True
+    assert distill_command("--no-centre-text").centre_text is False
+    assert distill_command("--schedule", "paper", "--centre-text").centre_text is True
     # One training goal has no spread to scale by: its policy reads the embedding raw.
     assert centres_text(DistillConfig(), "language", tuple(t.text for t in TRAIN_TASKS[:2]))
     assert not centres_text(DistillConfig(), "language", tuple(t.text for t in TRAIN_TASKS[:1]))
