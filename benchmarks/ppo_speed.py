@@ -1,9 +1,15 @@
-"""PPO speed with the zsrm reward against the oracle reward, same configuration both ways.
+"""Speed of the whole ``zsrm train`` loop, the default configuration against the one before it.
 
-Prints and writes (``--out``): env steps/s of PPO with each reward, ``ratio`` = zsrm / oracle
-(the reward model's cost in the RL loop), env-only steps/s (the same vectorised scenes
-stepped with random actions, no reward, no policy) and ``env_fraction`` = PPO with the zsrm
-reward / env-only. One process, one torch thread, measured in one run.
+Each configuration (a ``--config`` preset) trains the same goal with the zsrm reward (the
+shipped student) through :func:`zsrm.rl.ppo.train` itself: rollouts, reward, PPO updates, the
+inverse-dynamics loss, evaluations and checkpoints at the configuration's own intervals, the
+final evaluation and the policy's save. Beside each, the scenes alone: the same vectorised envs
+stepped with random actions (no reward, no policy). One process, one torch thread, all in one
+run. Prints and writes (``--out``):
+
+* ``env_fraction``: the default's train-loop env steps/s over its scenes' own;
+* ``speedup``: the default's train-loop env steps/s over the baseline's (``--baseline``, v1: the
+  configuration of the results committed before 2026-12-04).
 
     python benchmarks/ppo_speed.py --out results/ppo_speed.json
 """
@@ -13,6 +19,7 @@ import argparse
 import json
 import os
 import platform
+import tempfile
 import time
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -22,24 +29,19 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 
-def ppo_steps_per_s(cfg, steps: int) -> float:
-    from zsrm.rewards import VecZeroShotReward
-    from zsrm.rl.envs import goal_camera, make_reward, make_vec, task_entry
-    from zsrm.rl.features import VecImageFeatures
-    from zsrm.rl.ppo import build_ppo
-    from zsrm.vlm import load_vlm
+def train_steps_per_s(cfg) -> tuple[float, int]:
+    """Env steps/s of one whole ``zsrm train`` run of ``cfg`` (and its env steps)."""
+    from zsrm.rl.ppo import train
 
-    venv = make_vec(cfg, cfg.n_envs, cfg.seed)
-    venv = VecImageFeatures(VecZeroShotReward(venv, make_reward(cfg), task_entry(cfg.goal).goal),
-                            load_vlm(cfg.vlm), goal_camera(cfg.goal))
-    model = build_ppo(cfg, venv)
-    model.learn(cfg.n_envs * cfg.n_steps)  # warm-up: first rollout and update
-    t = time.perf_counter()
-    model.learn(steps // cfg.action_repeat, reset_num_timesteps=False)
-    return steps / (time.perf_counter() - t)
+    with tempfile.TemporaryDirectory() as out:
+        t = time.perf_counter()
+        summary = train(cfg, out, progress=False)
+        wall = time.perf_counter() - t
+    return summary["env_steps"] / wall, summary["env_steps"]
 
 
 def env_steps_per_s(cfg, steps: int) -> float:
+    """Env steps/s of the training envs alone, random actions, no reward, no policy."""
     from zsrm.rl.envs import make_vec
 
     venv = make_vec(cfg, cfg.n_envs, cfg.seed)
@@ -49,36 +51,49 @@ def env_steps_per_s(cfg, steps: int) -> float:
     t = time.perf_counter()
     for _ in range(decisions):
         venv.step(rng.uniform(-1, 1, (cfg.n_envs, *venv.action_space.shape)).astype(np.float32))
-    return decisions * cfg.n_envs * cfg.action_repeat / (time.perf_counter() - t)
+    speed = decisions * cfg.n_envs * cfg.action_repeat / (time.perf_counter() - t)
+    venv.close()
+    return speed
 
 
 def main(argv=None):
-    from zsrm.rl.config import TrainConfig
+    from zsrm.rl.config import preset
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--goal", default="stack")
-    parser.add_argument("--steps", type=int, default=16_384, help="env steps timed per reward")
+    parser.add_argument("--steps", type=int, default=60_000, help="env steps of each timed train run")
+    parser.add_argument("--config", default="cpu", help="the configuration measured (a TrainConfig preset)")
+    parser.add_argument("--baseline", default="v1", help="the configuration it is compared with")
     parser.add_argument("--out", default=None)
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
-    speeds = {}
-    for reward in ("oracle", "zsrm"):
-        speeds[reward] = ppo_steps_per_s(TrainConfig(goal=args.goal, reward=reward), args.steps)
-        print(f"PPO with the {reward} reward: {speeds[reward]:.0f} env steps/s", flush=True)
-    env_only = env_steps_per_s(TrainConfig(goal=args.goal), args.steps)
-    print(f"env only: {env_only:.0f} env steps/s")
-    cfg = TrainConfig(goal=args.goal)
+    runs = {}
+    for name in (args.config, args.baseline):
+        cfg = preset(name, goal=args.goal, reward="zsrm", steps=args.steps)
+        train_speed, env_steps = train_steps_per_s(cfg)
+        env_only = env_steps_per_s(cfg, 16_384)
+        runs[name] = {"train_steps_per_s": train_speed, "env_only_steps_per_s": env_only,
+                      "env_fraction": train_speed / env_only, "env_steps": env_steps,
+                      "train_config": cfg.to_dict()}
+        print(f"{name}: zsrm train {train_speed:.0f} env steps/s, scenes alone {env_only:.0f} "
+              f"(fraction {train_speed / env_only:.2f})", flush=True)
+    new, old = runs[args.config], runs[args.baseline]
     result = {
-        "ratio": speeds["zsrm"] / speeds["oracle"],
-        "env_fraction": speeds["zsrm"] / env_only,
-        "ppo_zsrm_steps_per_s": speeds["zsrm"], "ppo_oracle_steps_per_s": speeds["oracle"],
-        "env_only_steps_per_s": env_only,
-        "meta": {"goal": args.goal, "steps_timed": args.steps, "n_envs": cfg.n_envs, "action_repeat": cfg.action_repeat,
-                 "zsrm_reward": cfg.reward_model, "policy_vision": f"frozen {cfg.vlm} VLM trunk + keypoints",
+        "env_fraction": new["env_fraction"],
+        "speedup": new["train_steps_per_s"] / old["train_steps_per_s"],
+        "train_steps_per_s": new["train_steps_per_s"], "env_only_steps_per_s": new["env_only_steps_per_s"],
+        "configs": runs,
+        "meta": {"goal": args.goal, "reward": "zsrm (the shipped student)", "config": args.config,
+                 "baseline": args.baseline, "steps_per_run": args.steps,
+                 "timed": "the whole zsrm train run: rollouts, reward, PPO updates, inverse-dynamics loss, evaluations "
+                          "and checkpoints every 20k env steps, final 30-episode evaluation, saving the policy",
                  "torch_threads": 1, "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU",
-                 "command": "python benchmarks/ppo_speed.py --out results/ppo_speed.json"},
+                 "command": "python benchmarks/ppo_speed.py"
+                            + (f" --steps {args.steps}" if args.steps != 60_000 else "")
+                            + (f" --out {args.out}" if args.out else "")},
     }
-    print(f"ratio zsrm/oracle {result['ratio']:.2f}, env_fraction {result['env_fraction']:.2f}")
+    print(f"speedup {result['speedup']:.2f} ({args.config} against {args.baseline}), "
+          f"env_fraction {result['env_fraction']:.2f}")
     if args.out:
         with open(args.out, "w") as f:
             json.dump(result, f, indent=2)

@@ -18,9 +18,9 @@ from dataclasses import asdict, replace
 import numpy as np
 
 from zsrm.rewards import VecZeroShotReward
-from zsrm.rl.envs import goal_camera, make_reward, make_vec, task_entry
+from zsrm.rl.envs import make_reward, make_vec, task_entry
 from zsrm.rl.evaluate import eval_seed
-from zsrm.rl.features import VecImageFeatures
+from zsrm.rl.features import policy_view
 from zsrm.rl.policy import PolicyBundle
 from zsrm.tasks.relations import RELATIONS, WORLD_THRESHOLDS, camera_plane
 from zsrm.vlm import load_vlm
@@ -36,7 +36,7 @@ def score_rollouts(policy: str, episodes: int, reward_model: str | None = None) 
     task = entry.task
     scorer = replace(cfg, reward="zsrm", reward_model=reward_model or cfg.reward_model)
     venv = VecZeroShotReward(make_vec(cfg, episodes, eval_seed(cfg.seed)), make_reward(scorer), entry.goal)
-    venv = VecImageFeatures(venv, load_vlm(cfg.vlm), goal_camera(cfg.goal))
+    venv = policy_view(venv, load_vlm(cfg.vlm), cfg)
     camera = RELATIONS[task.relation].camera
     obs, rows, running = venv.reset(), [], np.ones(episodes, dtype=bool)
     while running.any():

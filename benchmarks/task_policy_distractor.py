@@ -31,9 +31,9 @@ from tqdm import tqdm
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.evaluation.multitask import OnThirdBlock, task_seed
 from zsrm.policy.rollouts import policy_folder
-from zsrm.rl.envs import goal_camera, make_vec
+from zsrm.rl.envs import make_vec
 from zsrm.rl.evaluate import mean_se_cell
-from zsrm.rl.features import VecImageFeatures
+from zsrm.rl.features import policy_view
 from zsrm.rl.policy import PolicyBundle
 from zsrm.tasks.catalogue import TRAIN_TASKS, choice_colour
 from zsrm.vlm import load_vlm
@@ -73,7 +73,7 @@ def main() -> None:
             distractors = (third,) if scene != "plain" else ()
             venv = OnThirdBlock(make_vec(bundle.cfg, args.episodes, seed, distractors=distractors), mover, third)
             try:
-                result = run_vec_episodes(VecImageFeatures(venv, vlm, goal_camera(task.text)),
+                result = run_vec_episodes(policy_view(venv, vlm, bundle.cfg),
                                           lambda obs: bundle.act(obs, deterministic=bundle.cfg.eval_deterministic),
                                           also=("on_third",))
             finally:

@@ -32,7 +32,7 @@ class Train(TrainConfig):
     """Train a policy from pixels with PPO and a reward from the goal sentence."""
 
     out: str | None = None  # run folder (default: runs/rl/<goal>-<reward>-<seed>)
-    config: Literal["cpu", "paper"] = "cpu"  # preset: cpu (300k steps, 2 cores) or paper (200k steps, more envs)
+    config: Literal["cpu", "paper", "v1"] = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v1 (before 2026-12-04)
     fresh: bool = False  # start over instead of resuming the run folder's checkpoint
     device: str = "cpu"  # where the VLM trunk and PPO run: cpu, cuda, cuda:N or auto (not part of the run's config)
 
@@ -98,6 +98,7 @@ class Sweep:
     gather_only: bool = False  # train nothing: gather the trials finished so far (e.g. while a sweep runs)
     vlm: str = "scene"  # the VLM whose image trunk the policies read (a folder pretrained by zsrm pretrain-vlm)
     init_root: str | None = None  # start each trial from the policy of the trial of its name under here
+    config: Literal["cpu", "paper", "v1"] = "cpu"  # TrainConfig preset of every trial (v1: before 2026-12-04)
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
     def run(self) -> int:
@@ -131,7 +132,10 @@ class Sweep:
     def overrides(self) -> dict:
         """The TrainConfig settings every trial shares."""
         # A model folder by its absolute path: Ray Tune runs each trial in its own working directory.
-        return {**self.train, "steps": self.steps, "reward_model": absolute_if_folder(self.reward_model),
+        if self.config not in PRESETS:
+            raise ValueError(f"unknown config {self.config!r}; choose one of {', '.join(PRESETS)}")
+        return {**PRESETS[self.config], **self.train, "steps": self.steps,
+                "reward_model": absolute_if_folder(self.reward_model),
                 "vlm": absolute_if_folder(self.vlm)}
 
     def trials(self) -> list[dict]:
@@ -148,6 +152,7 @@ class Sweep:
                              "most 100 control steps" if "pendulum" in self.tasks else ""),
                 "command": f"zsrm sweep --tasks {' '.join(self.tasks)} --rewards {' '.join(self.rewards)} "
                            f"--seeds {' '.join(map(str, self.seeds))} --steps {self.steps} --out {self.out}"
+                           + (f" --config {self.config}" if self.config != "cpu" else "")
                            + (f" --vlm {self.vlm}" if self.vlm != "scene" else "")
                            + (f" --reward-model {self.reward_model}" if self.reward_model != "student" else ""),
                 "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU"}

@@ -130,7 +130,7 @@ def collect_task(policy: str | Path, goal: str, episodes: int, envs: int) -> tup
     import torch
 
     from zsrm.rl.envs import goal_camera, make_vec
-    from zsrm.rl.features import VecImageFeatures
+    from zsrm.rl.features import policy_view
     from zsrm.rl.policy import PolicyBundle
     from zsrm.vlm import load_vlm
 
@@ -145,8 +145,7 @@ def collect_task(policy: str | Path, goal: str, episodes: int, envs: int) -> tup
     for start in range(0, episodes, envs):
         n, seed = min(envs, episodes - start), COLLECT_SEED + 1000 * index + start
         torch.manual_seed(seed)  # the policy samples its actions: same seed, same data
-        venv = DecisionRecorder(VecImageFeatures(make_vec(bundle.cfg, n, seed),
-                                                 vlm, goal_camera(goal)))
+        venv = DecisionRecorder(policy_view(make_vec(bundle.cfg, n, seed), vlm, bundle.cfg))
         try:
             result = run_vec_episodes(venv, lambda obs: bundle.act(obs, deterministic=bundle.cfg.eval_deterministic))
         finally:

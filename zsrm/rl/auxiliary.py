@@ -25,21 +25,23 @@ class InverseDynamics(nn.Module):
         return self.net(torch.cat([points, next_points], dim=1))
 
 
-def consecutive_pairs(episode_starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Indices (step, env) of the buffer's transitions t -> t + 1 inside one episode.
+def env_groups(n_envs: int, n_steps: int, batch_size: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """The rollout's envs in random groups of about ``batch_size / n_steps`` envs each: one
+    minibatch per group, whose frames each pass through the keypoints once.
 
-    >>> steps, envs = consecutive_pairs(np.array([[1, 1], [0, 0], [1, 0]]))
-    >>> list(zip(steps.tolist(), envs.tolist()))
-    [(0, 0), (0, 1), (1, 1)]
+    >>> [len(g) for g in env_groups(16, 32, 256, np.random.default_rng(0))]
+    [8, 8]
     """
-    valid = episode_starts[1:] == 0  # step t + 1 continues the episode of step t
-    steps, envs = np.nonzero(valid)
-    return steps, envs
+    return np.array_split(rng.permutation(n_envs), max(1, n_envs * n_steps // batch_size))
 
 
 class InverseDynamicsAux(BaseCallback):
     """After each rollout (before PPO's update), train the policy's keypoint heads and an
-    inverse-dynamics model on the rollout's consecutive frames."""
+    inverse-dynamics model on the rollout's consecutive frames.
+
+    A minibatch is a group of envs' whole stretches of the rollout: each frame's keypoints are
+    computed once and serve as the "after" of one transition and the "before" of the next
+    (half the keypoint passes of sampling transitions one by one)."""
 
     def __init__(self, points_dim: int, action_dim: int, lr: float = 3e-4, epochs: int = 1, batch_size: int = 256,
                  seed: int = 0, device: str = "cpu"):
@@ -48,6 +50,7 @@ class InverseDynamicsAux(BaseCallback):
         self.device = torch.device(device)
         self.model_inverse = InverseDynamics(points_dim, action_dim).to(self.device)
         self.lr, self.epochs, self.batch_size = lr, epochs, batch_size
+        self.rng = np.random.default_rng(seed)
         self.optimizer = None
 
     def _on_step(self) -> bool:
@@ -58,19 +61,21 @@ class InverseDynamicsAux(BaseCallback):
         if self.optimizer is None:
             self.optimizer = torch.optim.Adam([*extractor.parameters(), *self.model_inverse.parameters()], lr=self.lr)
         buffer = self.model.rollout_buffer
-        steps, envs = consecutive_pairs(buffer.episode_starts)
+        n_steps, n_envs = buffer.episode_starts.shape
+        continues = torch.as_tensor(buffer.episode_starts[1:] == 0, device=self.device)  # t -> t + 1 in one episode
         low, high = self.model.action_space.low, self.model.action_space.high
-        actions = torch.as_tensor(np.clip(buffer.actions[steps, envs], low, high), dtype=torch.float32,
-                                  device=self.device)
+        actions = torch.as_tensor(np.clip(buffer.actions[:-1], low, high), dtype=torch.float32, device=self.device)
         losses = []
         for _ in range(self.epochs):
-            for idx in np.array_split(np.random.permutation(len(steps)), max(1, len(steps) // self.batch_size)):
-                now = {k: torch.as_tensor(v[steps[idx], envs[idx]], device=self.device)
-                       for k, v in buffer.observations.items()}
-                nxt = {k: torch.as_tensor(v[steps[idx] + 1, envs[idx]], device=self.device)
-                       for k, v in buffer.observations.items()}
-                predicted = self.model_inverse(extractor.points(now), extractor.points(nxt))
-                loss = (predicted - actions[idx]).pow(2).mean()
+            for group in env_groups(n_envs, n_steps, self.batch_size, self.rng):
+                if not continues[:, group].any():
+                    continue
+                frames = {k: torch.as_tensor(v[:, group].reshape(n_steps * len(group), *v.shape[2:]), device=self.device)
+                          for k, v in buffer.observations.items()}
+                points = extractor.points(frames).reshape(n_steps, len(group), -1)
+                mask = continues[:, group]
+                predicted = self.model_inverse(points[:-1][mask], points[1:][mask])
+                loss = (predicted - actions[:, group][mask]).pow(2).mean()
                 self.optimizer.zero_grad()
                 loss.backward()
                 self.optimizer.step()

@@ -45,7 +45,7 @@ def mean_se_cell(values) -> dict:
 def evaluate(act, cfg: TrainConfig, episodes: int, seed: int, spread: str = "seen", wrap=None) -> dict:
     """Mean and standard error of the oracle episode reward over ``episodes`` seeded episodes,
     one env each. ``wrap`` turns the image VecEnv into what ``act`` reads (e.g.
-    :class:`~zsrm.rl.features.VecImageFeatures`)."""
+    :func:`~zsrm.rl.features.policy_view`)."""
     venv = make_vec(cfg, episodes, eval_seed(seed), spread)
     if wrap is not None:
         venv = wrap(venv)
@@ -72,7 +72,7 @@ def rollout(policy: str | Path, episodes: int = 10, seed: int = 0, spread: str =
             gif: str | Path | None = None) -> dict:
     """The oracle episode reward of a saved policy (a folder written by ``zsrm train``) or of
     ``"random:GOAL"`` over seeded episodes; with ``gif``, a GIF of the first episode."""
-    from zsrm.rl.features import VecImageFeatures
+    from zsrm.rl.features import policy_view
     from zsrm.rl.policy import PolicyBundle
     from zsrm.vlm import load_vlm
 
@@ -89,7 +89,7 @@ def rollout(policy: str | Path, episodes: int = 10, seed: int = 0, spread: str =
             return bundle.act(obs, deterministic=cfg.eval_deterministic)
 
         def features(venv):
-            return VecImageFeatures(venv, vlm, goal_camera(cfg.goal))
+            return policy_view(venv, vlm, cfg)
 
     import torch
 

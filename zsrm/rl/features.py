@@ -27,13 +27,17 @@ IMAGE_KEY = "image"
 
 
 class VecImageFeatures(VecEnvWrapper):
-    """Replace a camera's images by the frozen VLM trunk's feature maps ``(C, h, w)`` float32.
+    """Replace a camera's images by the frozen VLM trunk's feature maps ``(C, h, w)`` float32
+    and the frame itself (CHW uint8), for :class:`KeypointExtractor`.
 
-    Put it outside the reward wrapper, so the reward still scores pixels. Terminal
-    observations in ``infos`` are converted too (PPO bootstraps truncated episodes from them).
+    ``trunk_size`` and ``pixel_size`` (0: the camera's size) shrink the frame (area average)
+    before the trunk and for the pixel CNN: at 32 px the trunk costs a quarter of its 64 px
+    time and its map is 8x8 (``benchmarks/train_profile.py``). Put it outside the reward
+    wrapper, so the reward still scores the camera's frames. Terminal observations in
+    ``infos`` are converted too (PPO bootstraps truncated episodes from them).
     """
 
-    def __init__(self, venv: VecEnv, vlm, camera: str):
+    def __init__(self, venv: VecEnv, vlm, camera: str, trunk_size: int = 0, pixel_size: int = 0):
         if camera not in venv.observation_space.spaces:
             raise ValueError(f"the env observes {', '.join(venv.observation_space.spaces)}, not camera {camera!r}")
         self.vlm = vlm.eval()
@@ -41,19 +45,34 @@ class VecImageFeatures(VecEnvWrapper):
             p.requires_grad_(False)
         self.camera = camera
         size = venv.observation_space[camera].shape[0]
+        self.trunk_size, self.pixel_size = check_view(trunk_size, size), check_view(pixel_size, size)
         with torch.no_grad():
-            c, h, w = self.vlm.image_trunk(self.vlm.preprocess(np.zeros((1, size, size, 3), np.uint8))).shape[1:]
+            c, h, w = self.vlm.image_trunk(self.trunk_input(np.zeros((1, size, size, 3), np.uint8))).shape[1:]
         space = gym.spaces.Dict({FEATURES_KEY: gym.spaces.Box(0.0, np.inf, (c, h, w), np.float32),
-                                 IMAGE_KEY: gym.spaces.Box(0, 255, (3, size, size), np.uint8)})
+                                 IMAGE_KEY: gym.spaces.Box(0, 255, (3, self.pixel_size, self.pixel_size), np.uint8)})
         super().__init__(venv, observation_space=space)
+
+    def trunk_input(self, images: np.ndarray) -> torch.Tensor:
+        pixels = self.vlm.preprocess(images)
+        if pixels.shape[-1] != self.trunk_size:
+            pixels = nn.functional.interpolate(pixels, size=self.trunk_size, mode="area")
+        return pixels
 
     @torch.no_grad()
     def features(self, images: np.ndarray) -> np.ndarray:
-        return self.vlm.image_trunk(self.vlm.preprocess(images)).float().cpu().numpy()
+        return self.vlm.image_trunk(self.trunk_input(images)).float().cpu().numpy()
+
+    def frames(self, images: np.ndarray) -> np.ndarray:
+        """(N, H, W, 3) uint8 -> (N, 3, s, s) uint8 at the pixel CNN's side ``s`` (area average)."""
+        n, size = images.shape[0], images.shape[1]
+        if size != self.pixel_size:
+            k = size // self.pixel_size
+            images = images.reshape(n, self.pixel_size, k, self.pixel_size, k, 3).mean(axis=(2, 4)).round()
+        return np.ascontiguousarray(images.transpose(0, 3, 1, 2), dtype=np.uint8)
 
     def convert(self, images: np.ndarray) -> dict:
         """Camera frames (N, H, W, 3) uint8 -> the policy's observation (maps and CHW frames)."""
-        return {FEATURES_KEY: self.features(images), IMAGE_KEY: np.ascontiguousarray(images.transpose(0, 3, 1, 2))}
+        return {FEATURES_KEY: self.features(images), IMAGE_KEY: self.frames(images)}
 
     def _convert(self, obs) -> dict:
         return self.convert(obs[self.camera])
@@ -69,6 +88,22 @@ class VecImageFeatures(VecEnvWrapper):
             for j, i in enumerate(terminal):
                 infos[i]["terminal_observation"] = {k: v[j] for k, v in converted.items()}
         return self._convert(obs), rewards, dones, infos
+
+
+def check_view(size: int, camera_size: int) -> int:
+    """The side a frame is shrunk to (0: the camera's own), which must divide the camera's."""
+    size = int(size) or camera_size
+    if size < 8 or camera_size % size:
+        raise ValueError(f"a policy view of {size} px must be at least 8 and divide the camera's {camera_size} px")
+    return size
+
+
+def policy_view(venv: VecEnv, vlm, cfg) -> VecImageFeatures:
+    """What a policy trained with TrainConfig ``cfg`` sees of ``venv``: its goal camera through
+    the frozen VLM trunk and the pixel CNN, at the sizes ``cfg`` names."""
+    from zsrm.rl.envs import goal_camera
+
+    return VecImageFeatures(venv, vlm, goal_camera(cfg.goal), cfg.trunk_size, cfg.pixel_size)
 
 
 class SpatialSoftmax(nn.Module):
@@ -87,9 +122,12 @@ class SpatialSoftmax(nn.Module):
 
     def forward(self, maps: torch.Tensor) -> torch.Tensor:
         flat = maps.flatten(2)
-        peak = (flat.amax(dim=-1) - flat.mean(dim=-1)) / (flat.std(dim=-1) + 1e-6)
-        standard = (flat - flat.mean(dim=-1, keepdim=True)) / (flat.std(dim=-1, keepdim=True) + 1e-6)
-        attention = torch.softmax(standard / self.log_temperature.exp(), dim=-1)
+        # mean and (unbiased) std once for both uses: half the time of calling std() twice
+        mean = flat.mean(dim=-1, keepdim=True)
+        centred = flat - mean
+        std = (centred.square().sum(dim=-1, keepdim=True) / (flat.shape[-1] - 1)).sqrt() + 1e-6
+        attention = torch.softmax(centred / (std * self.log_temperature.exp()), dim=-1)
+        peak = ((flat.amax(dim=-1, keepdim=True) - mean) / std).squeeze(-1)
         points = attention @ self.grid  # (N, K, 2)
         return torch.cat([points.flatten(1), peak / 4.0], dim=1)
 
@@ -122,9 +160,16 @@ class KeypointExtractor(BaseFeaturesExtractor):
         width = 3 * keypoints + (self.pixels.out_dim if pixels else 0)
         self.out = nn.Sequential(nn.Linear(width, features_dim), nn.ReLU())
 
+    def heat_maps(self, maps: torch.Tensor) -> torch.Tensor:
+        """``self.heat`` (two 1x1 convs) as matrix products over channels-last cells: the same
+        weights and result, half the time of Conv2d's 1x1 path on this CPU."""
+        first, second = self.heat[0], self.heat[2]
+        x = nn.functional.relu(nn.functional.linear(maps.permute(0, 2, 3, 1), first.weight.flatten(1), first.bias))
+        return nn.functional.linear(x, second.weight.flatten(1), second.bias).permute(0, 3, 1, 2)
+
     def points(self, observations: dict) -> torch.Tensor:
         """The keypoints (x, y, strength) of both branches, before the linear layer."""
-        points = self.softmax(self.heat(observations[FEATURES_KEY]))
+        points = self.softmax(self.heat_maps(observations[FEATURES_KEY]))
         if self.pixels is not None:
             points = torch.cat([points, self.pixels(observations[IMAGE_KEY])], dim=1)
         return points

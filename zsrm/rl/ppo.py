@@ -29,7 +29,7 @@ from zsrm.rl.config import TrainConfig
 from zsrm.rl.curiosity import ICMUpdate, VecCuriosity
 from zsrm.rl.envs import goal_camera, make_reward, make_vec, task_entry
 from zsrm.rl.evaluate import evaluate, random_actions
-from zsrm.rl.features import VecImageFeatures
+from zsrm.rl.features import policy_view
 from zsrm.rl.policy import PolicyBundle, load_checkpoint, policy_kwargs, save_checkpoint
 from zsrm.vlm import load_vlm
 from zsrm.vlm.files import atomic_path, read_json, write_json
@@ -45,8 +45,8 @@ def build_ppo(cfg: TrainConfig, venv, device: str = "cpu") -> PPO:
 
 
 class EvalAndCheckpoint(BaseCallback):
-    """Every ``eval_every`` env steps: the oracle metric on the eval envs (CSV + TensorBoard);
-    every ``checkpoint_every``: a checkpoint. Also drives the progress bar."""
+    """Every ``eval_every`` env steps: the oracle metric on the eval envs (CSV + TensorBoard); at
+    the first rollout's end past each ``checkpoint_every``: a checkpoint. Also drives the progress bar."""
 
     def __init__(self, cfg: TrainConfig, out: Path, vlm, rows: list[dict], progress, on_eval=None,
                  extra_modules: dict | None = None):
@@ -67,16 +67,20 @@ class EvalAndCheckpoint(BaseCallback):
         if self.env_steps() >= self.next_eval:
             self.evaluate()
             self.next_eval += self.cfg.eval_every
+        return True
+
+    def _on_rollout_end(self) -> None:
+        # only at a rollout's end: a run resumes on whole rollouts, so it ends at the same step count
         if self.env_steps() >= self.next_ckpt:
             save_checkpoint(self.out / "checkpoint", self.model, self.cfg, self.env_steps(), self.rows,
                             self.extra_modules)
-            self.next_ckpt += self.cfg.checkpoint_every
-        return True
+            while self.next_ckpt <= self.env_steps():
+                self.next_ckpt += self.cfg.checkpoint_every
 
     def evaluate(self):
         cfg = self.cfg
         result = evaluate(policy_act(self.model, cfg.eval_deterministic), cfg, cfg.eval_episodes, cfg.seed,
-                          wrap=lambda v: VecImageFeatures(v, self.vlm, goal_camera(cfg.goal)))
+                          wrap=lambda v: policy_view(v, self.vlm, cfg))
         # Mean reward per decision over the interval, times the decisions of an episode.
         train_reward = float(np.mean(self.rewards) * self.cfg.episode_decisions) if self.rewards else 0.0
         self.rewards = []
@@ -129,13 +133,12 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
 
     device = resolve_device(device)
     vlm = load_vlm(cfg.vlm, device=device)
-    camera = goal_camera(cfg.goal)
     done_steps, rows = 0, []
     state = None if fresh else load_checkpoint(out / "checkpoint", cfg)
     if state is not None:
         done_steps, rows = state["env_steps"], state["rows"]
     venv, extra_callbacks, extra_modules = rewarded_env(cfg, out, done_steps)
-    venv = VecImageFeatures(venv, vlm, camera)
+    venv = policy_view(venv, vlm, cfg)
     model = build_ppo(cfg, venv, device)
     if cfg.aux_inverse:
         points_dim = model.policy.features_extractor.out[0].in_features
@@ -156,7 +159,7 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
             model.learn(remaining // cfg.action_repeat, callback=[*extra_callbacks, callback],
                         reset_num_timesteps=state is None)
         final = evaluate(policy_act(model, cfg.eval_deterministic), cfg, FINAL_EPISODES, cfg.seed,
-                         wrap=lambda v: VecImageFeatures(v, vlm, camera))
+                         wrap=lambda v: policy_view(v, vlm, cfg))
     venv.close()
     PolicyBundle(model.policy, cfg).save(out / "policy")
     save_checkpoint(out / "checkpoint", model, cfg, callback.env_steps(), rows, extra_modules)

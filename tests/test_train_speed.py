@@ -1,0 +1,131 @@
+"""The fast default of ``zsrm train``: shrunk policy views, the v1 preset behind the older
+results, and the two benchmark scripts that measure it (no timed assertions)."""
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from zsrm.rl.config import PRESETS, TrainConfig, preset
+from zsrm.rl.envs import make_vec
+from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, check_view, policy_view
+from zsrm.testing import ColourVLM
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+TINY = dict(n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, keypoints=4)
+
+
+def v1_trials() -> list[Path]:
+    return sorted((ROOT / "results" / "rl" / "v1" / "trials").glob("*.json"))
+
+
+def test_v1_preset_is_the_configuration_of_the_older_committed_trials():
+    trials = v1_trials()
+    assert len(trials) >= 30
+    for path in trials:
+        committed = json.loads(path.read_text())["config"]
+        for key, value in PRESETS["v1"].items():
+            assert TrainConfig.from_dict(committed).__getattribute__(key) == value, (path.name, key)
+        same = {k: committed[k] for k in ("goal", "reward", "seed", "steps", "reward_model", "vlm", "start")
+                if k in committed}
+        assert preset("v1", **same).to_dict() == committed, path.name
+
+
+def test_default_differs_from_v1_and_an_old_run_reads_as_v1():
+    new, old = TrainConfig(), preset("v1")
+    assert (new.action_repeat, new.trunk_size, new.pixel_size) != (old.action_repeat, old.trunk_size, old.pixel_size)
+    assert "trunk_size" not in old.to_dict() and "pixel_size" not in old.to_dict()  # older runs never wrote them
+    assert TrainConfig.from_dict(old.to_dict()) == old
+    assert TrainConfig.from_dict(new.to_dict()) == new
+
+
+def test_policy_view_shrinks_the_frame_for_the_trunk_and_the_pixel_cnn():
+    vlm = ColourVLM()
+    for trunk, pixel in ((0, 0), (32, 32), (32, 16)):
+        cfg = TrainConfig(goal="push_close", trunk_size=trunk, pixel_size=pixel, **TINY)
+        venv = policy_view(make_vec(cfg, 2, 0), vlm, cfg)
+        side = pixel or 64
+        assert venv.observation_space[IMAGE_KEY].shape == (3, side, side)
+        assert venv.observation_space.contains({k: v[0] for k, v in venv.reset().items()})
+        frames = venv.venv.reset()[venv.camera]  # the camera's 64 px frames
+        obs = venv.convert(frames)
+        assert obs[IMAGE_KEY].shape == (2, 3, side, side) and obs[IMAGE_KEY].dtype == np.uint8
+        k = 64 // side
+        expected = frames.reshape(2, side, k, side, k, 3).mean(axis=(2, 4)).round().astype(np.uint8)
+        np.testing.assert_array_equal(obs[IMAGE_KEY], expected.transpose(0, 3, 1, 2))
+        venv.close()
+
+
+def test_trunk_reads_the_shrunk_frame():
+    from zsrm.vlm import load_vlm
+
+    vlm = load_vlm("scene")
+    cfg = TrainConfig(goal="stack", **TINY)
+    full = policy_view(make_vec(TrainConfig(goal="stack", trunk_size=0, **TINY), 1, 0), vlm,
+                       TrainConfig(goal="stack", trunk_size=0, **TINY))
+    half = policy_view(make_vec(cfg, 1, 0), vlm, cfg)
+    assert full.observation_space[FEATURES_KEY].shape[1:] == (16, 16)
+    assert half.observation_space[FEATURES_KEY].shape[1:] == (8, 8)
+    frame = full.venv.reset()[full.camera]
+    pixels = torch.nn.functional.interpolate(vlm.preprocess(frame), size=32, mode="area")
+    with torch.no_grad():
+        np.testing.assert_allclose(half.features(frame), vlm.image_trunk(pixels).numpy(), rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("size", [4, 24, 128])
+def test_a_view_that_does_not_divide_the_camera_is_one_clear_error(size):
+    with pytest.raises(ValueError, match="must be at least 8 and divide the camera's 64 px"):
+        check_view(size, 64)
+
+
+def test_train_config_rejects_a_bad_view_before_training(tmp_path):
+    from zsrm.rl.ppo import train
+
+    with pytest.raises(ValueError, match="divide the camera's 64 px"):
+        train(TrainConfig(goal="push_close", reward="oracle", steps=128, pixel_size=24, **TINY), tmp_path,
+              progress=False)
+
+
+def test_profile_timers_count_exclusive_time_under_their_root(monkeypatch):
+    import train_profile
+
+    clock = iter(range(100))
+    monkeypatch.setattr(train_profile.time, "perf_counter", lambda: next(clock))
+    timers = train_profile.Timers()
+    with timers.part("rollout_other"):          # t 0 .. 9
+        with timers.part("scenes"):             # t 1 .. 2
+            pass
+        with timers.part("evaluation"):         # t 3 .. 8
+            with timers.part("scenes"):         # t 4 .. 5
+                pass
+            with timers.part("vlm_trunk"):      # t 6 .. 7
+                pass
+    assert dict(timers.seconds) == {"scenes": 1, "evaluation/scenes": 1, "evaluation/vlm_trunk": 1,
+                                    "evaluation": 3, "rollout_other": 9 - 1 - 5}
+
+
+def test_profile_and_speed_benchmarks_run_a_tiny_train(tmp_path, monkeypatch):
+    import ppo_speed
+    import train_profile
+
+    monkeypatch.setitem(PRESETS, "tiny-new", {**TINY, "eval_every": 128, "checkpoint_every": 128})
+    monkeypatch.setitem(PRESETS, "tiny-old", {**PRESETS["v1"], **TINY, "eval_every": 128, "checkpoint_every": 128})
+    run = train_profile.profile("tiny-new", "oracle", 256, "push_close")
+    parts = run["seconds_per_10k_env_steps"]
+    for part in ("scenes", "rendering", "vlm_trunk", "reward", "policy_forward", "inverse_dynamics", "evaluation",
+                 "checkpoint", "update/vlm_keypoints/forward", "update/pixel_cnn/backward", "update/heads/forward"):
+        assert part in parts, part
+    assert all(v >= 0 for k, v in parts.items() if k != "update/other"), parts
+    assert run["env_steps"] == 256 and run["ppo_updates"] >= 1
+    out = tmp_path / "speed.json"
+    result = ppo_speed.main(["--goal", "push_close", "--steps", "256", "--config", "tiny-new",
+                             "--baseline", "tiny-old", "--out", str(out)])
+    written = json.loads(out.read_text())
+    assert written["speedup"] == pytest.approx(result["speedup"])
+    assert written["speedup"] == pytest.approx(written["configs"]["tiny-new"]["train_steps_per_s"]
+                                               / written["configs"]["tiny-old"]["train_steps_per_s"])
+    assert written["env_fraction"] == pytest.approx(written["configs"]["tiny-new"]["env_fraction"])
+    assert written["configs"]["tiny-old"]["train_config"]["action_repeat"] == 2
