@@ -1,19 +1,26 @@
-"""Where ``zsrm train``'s time goes: seconds per 10k env steps of each part of the loop.
+"""Where ``zsrm train``'s time goes, and what each speed lever bought: a ladder of configurations
+from v1 (the configuration of the results committed before 2026-12-04) to the default, one
+lever added per rung, each profiled part by part.
 
-Runs :func:`zsrm.rl.ppo.train` itself (rollouts, reward, PPO update, auxiliary loss,
-evaluation, checkpoints) for each named configuration, with timers around its parts
-(exclusive time: a part's time excludes the parts timed inside it):
+Each rung runs :func:`zsrm.rl.ppo.train` itself (rollouts, reward, PPO update, auxiliary loss,
+evaluation and checkpoints every 20k env steps, the final evaluation) with the zsrm reward (the
+shipped student), with timers around its parts (exclusive time: a part's time excludes the
+parts timed inside it), reported as seconds per 10k env steps:
 
 * ``scenes`` physics and SB3's VecEnv (``rendering`` apart), ``vlm_trunk`` the frozen VLM
   trunk on each frame, ``reward`` the reward model, ``policy_forward`` the policy's action
   during rollouts, ``rollout_other`` SB3's rollout bookkeeping;
-* ``update`` PPO's epochs, split per network (``update/<network>/forward`` and ``/backward``,
-  timed on the run's own last rollout buffer, minibatch by minibatch as PPO does, and scaled
-  to the run's updates) and ``update/other`` (losses, optimiser steps, bookkeeping: the rest);
+* ``update`` PPO's epochs in the loop; apart, ``update_by_network`` splits it per network
+  (``<network>/forward`` and ``/backward``, each network alone on the run's own last rollout
+  buffer, minibatch by minibatch as PPO does, scaled to the run's updates);
 * ``inverse_dynamics`` (the keypoints' auxiliary loss), ``curiosity`` (ICM's reward and update,
   ``--reward curiosity`` only), ``evaluation`` and ``checkpoint``.
 
-    python benchmarks/train_profile.py --configs v1 cpu --out results/rl/profile.json
+Levers in the code, which every rung has, are timed against the simple way beside them
+(``micro``): the spatial softmax, the keypoints' 1x1 convs, the VLM trunk at 32 px, and
+``torch.compile`` of the keypoint extractor (measured, not used: see ``note``).
+
+    python benchmarks/train_profile.py --out results/rl/profile.json
 """
 from __future__ import annotations
 
@@ -31,6 +38,15 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+
+# v1 to the default, one lever a rung (each rung's settings on top of the rungs before it)
+LADDER = (
+    ("v1", {}),
+    ("32 px policy views", {"trunk_size": 32, "pixel_size": 32}),
+    ("action repeat 4", {"action_repeat": 4}),
+    ("16 envs x 32 steps, 4 epochs of minibatch 32 (the default)", {"n_envs": 16, "n_steps": 32, "n_epochs": 4,
+                                                                     "batch_size": 32}),
+)
 
 # Parts that start their own branch of the tree: their inner parts are theirs.
 ROOTS = ("evaluation", "checkpoint", "inverse_dynamics", "curiosity_update")
@@ -169,11 +185,12 @@ def update_split(model, updates: int, repeats: int = 3) -> dict[str, float]:
     return {k: v / timed * per_update * updates for k, v in seconds.items()}
 
 
-def profile(config: str, reward: str, steps: int, goal: str) -> dict:
-    from zsrm.rl.config import preset
+def profile(settings: dict, reward: str, steps: int, goal: str) -> dict:
+    """Train ``steps`` env steps of TrainConfig ``settings`` under the timers."""
+    from zsrm.rl.config import TrainConfig
     from zsrm.rl.ppo import train
 
-    cfg = preset(config, goal=goal, reward=reward, steps=steps, eval_every=steps // 2, checkpoint_every=steps // 2)
+    cfg = TrainConfig(**{**settings, "goal": goal, "reward": reward, "steps": steps})
     timers = Timers()
     kept = instrument(timers)
     try:
@@ -187,39 +204,131 @@ def profile(config: str, reward: str, steps: int, goal: str) -> dict:
     parts = dict(timers.seconds)
     update = parts.pop("update", 0.0)
     split = update_split(kept["model"], kept["updates"])
-    parts.update({f"update/{k}": v for k, v in split.items()})
-    parts["update/other"] = update - sum(split.values())
+    parts["update"] = update
     parts["setup_and_final_evaluation"] = wall - sum(timers.seconds.values())
-    per_10k = {k: round(v / env_steps * 10_000, 3) for k, v in sorted(parts.items())}
-    return {"config": config, "reward": reward, "goal": goal, "env_steps": env_steps, "wall_s": round(wall, 1),
-            "env_steps_per_s": round(env_steps / wall, 1), "seconds_per_10k_env_steps": per_10k,
-            "ppo_updates": kept["updates"], "train_config": cfg.to_dict()}
+
+    def per_10k(values: dict) -> dict:
+        return {k: round(v / env_steps * 10_000, 3) for k, v in sorted(values.items())}
+
+    return {"reward": reward, "goal": goal, "env_steps": env_steps, "wall_s": round(wall, 1),
+            "env_steps_per_s": round(env_steps / wall, 1), "seconds_per_10k_env_steps": per_10k(parts),
+            "update_by_network_per_10k_env_steps": per_10k(split), "ppo_updates": kept["updates"],
+            "train_config": cfg.to_dict()}
+
+
+def ladder_settings() -> list[tuple[str, dict]]:
+    """Each rung's TrainConfig settings: v1's, then each lever added."""
+    from zsrm.rl.config import PRESETS
+
+    settings, rungs = dict(PRESETS["v1"]), []
+    for name, lever in LADDER:
+        settings = {**settings, **lever}
+        rungs.append((name, dict(settings)))
+    return rungs
+
+
+def old_spatial_softmax(softmax, maps: torch.Tensor) -> torch.Tensor:
+    """SpatialSoftmax.forward as it was in v1 (std computed twice), the simple way."""
+    flat = maps.flatten(2)
+    peak = (flat.amax(dim=-1) - flat.mean(dim=-1)) / (flat.std(dim=-1) + 1e-6)
+    standard = (flat - flat.mean(dim=-1, keepdim=True)) / (flat.std(dim=-1, keepdim=True) + 1e-6)
+    attention = torch.softmax(standard / softmax.log_temperature.exp(), dim=-1)
+    return torch.cat([(attention @ softmax.grid).flatten(1), peak / 4.0], dim=1)
+
+
+def per_call_ms(fn, repeats: int = 40) -> float:
+    for _ in range(3):
+        fn()
+    t = time.perf_counter()
+    for _ in range(repeats):
+        fn()
+    return (time.perf_counter() - t) / repeats * 1000
+
+
+def micro(compile_extractor: bool) -> dict:
+    """The code's levers against the simple way, on a minibatch of 32 (forward + backward)
+    or a rollout step's 16 frames (the frozen trunk, forward only)."""
+    import gymnasium as gym
+
+    from zsrm.rl.features import KeypointExtractor
+    from zsrm.vlm import load_vlm
+
+    torch.manual_seed(0)
+    space = gym.spaces.Dict({"features": gym.spaces.Box(0.0, np.inf, (128, 8, 8), np.float32),
+                             "image": gym.spaces.Box(0, 255, (3, 32, 32), np.uint8)})
+    extractor = KeypointExtractor(space)
+    obs = {"features": torch.rand(32, 128, 8, 8), "image": torch.randint(0, 256, (32, 3, 32, 32), dtype=torch.uint8)}
+    maps = torch.randn(32, 32, 8, 8, requires_grad=True)
+    results = {}
+
+    def pair(name, simple, fast):
+        simple_ms, fast_ms = per_call_ms(simple), per_call_ms(fast)
+        results[name] = {"simple_ms": round(simple_ms, 3), "fast_ms": round(fast_ms, 3),
+                         "ratio": round(simple_ms / fast_ms, 2)}
+
+    pair("spatial softmax (32 maps of 8x8, minibatch 32, forward + backward)",
+         lambda: old_spatial_softmax(extractor.softmax, maps).sum().backward(),
+         lambda: extractor.softmax(maps).sum().backward())
+    pair("keypoint heat, two 1x1 convs on the 128x8x8 map (minibatch 32, forward + backward): Conv2d / matmul",
+         lambda: extractor.heat(obs["features"]).sum().backward(),
+         lambda: extractor.heat_maps(obs["features"]).sum().backward())
+    vlm = load_vlm("scene")
+    frames = vlm.preprocess(np.random.default_rng(0).integers(0, 256, (16, 64, 64, 3), dtype=np.uint8))
+    small = torch.nn.functional.interpolate(frames, size=32, mode="area")
+    with torch.no_grad():
+        pair("frozen VLM trunk on 16 frames: 64 px / 32 px", lambda: vlm.image_trunk(frames),
+             lambda: vlm.image_trunk(small))
+    if compile_extractor:
+        t = time.perf_counter()
+        compiled = torch.compile(extractor)
+        compiled(obs).sum().backward()
+        compile_s = time.perf_counter() - t
+        pair("keypoint extractor (minibatch 32, forward + backward): eager / torch.compile",
+             lambda: extractor(obs).sum().backward(), lambda: compiled(obs).sum().backward())
+        results["keypoint extractor (minibatch 32, forward + backward): eager / torch.compile"]["compile_s"] = \
+            round(compile_s, 1)
+    return results
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--configs", nargs="+", default=["cpu"], help="TrainConfig presets to profile")
-    parser.add_argument("--rewards", nargs="+", default=["zsrm"], help="rewards to profile each preset with")
+    parser.add_argument("--rewards", nargs="+", default=["zsrm"], help="rewards to profile each rung with")
     parser.add_argument("--goal", default="stack")
-    parser.add_argument("--steps", type=int, default=20_000, help="env steps per profiled run")
+    parser.add_argument("--steps", type=int, default=40_000, help="env steps per profiled run")
+    parser.add_argument("--rungs", type=int, default=len(LADDER), help="profile the first N rungs of the ladder")
+    parser.add_argument("--curiosity-steps", type=int, default=20_000,
+                        help="also profile the curiosity reward (ICM) on the first and last rung, this many env steps")
+    parser.add_argument("--no-compile", action="store_true", help="skip timing torch.compile (about 20 s to compile)")
     parser.add_argument("--out", default=None)
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     runs = []
-    for config in args.configs:
-        for reward in args.rewards:
-            run = profile(config, reward, args.steps, args.goal)
-            runs.append(run)
-            print(f"{config} {reward}: {run['env_steps_per_s']:.0f} env steps/s over {run['env_steps']} steps")
-            for k, v in run["seconds_per_10k_env_steps"].items():
-                print(f"  {k:36s} {v:8.2f} s / 10k env steps")
-    result = {"runs": runs, "meta": {
-        "what": "seconds of each part of zsrm train per 10k env steps (exclusive times; update/<network> timed on "
-                "the run's last rollout buffer and scaled to its updates)",
+    rungs = ladder_settings()[:args.rungs]
+    plan = [(name, settings, reward, args.steps) for name, settings in rungs for reward in args.rewards]
+    if args.curiosity_steps:
+        plan += [(name, settings, "curiosity", args.curiosity_steps) for name, settings in (rungs[0], rungs[-1])]
+    for name, settings, reward, steps in plan:
+        run = {"rung": name, **profile(settings, reward, steps, args.goal)}
+        runs.append(run)
+        print(f"{name}, {reward}: {run['env_steps_per_s']:.0f} env steps/s over {run['env_steps']} steps", flush=True)
+        for k, v in run["seconds_per_10k_env_steps"].items():
+            print(f"  {k:40s} {v:8.2f} s / 10k env steps")
+    levers = micro(compile_extractor=not args.no_compile)
+    for k, v in levers.items():
+        print(f"{k}: {v['simple_ms']:.2f} ms -> {v['fast_ms']:.2f} ms ({v['ratio']:.2f}x)")
+    result = {"runs": runs, "micro": levers, "meta": {
+        "what": "seconds of each part of zsrm train per 10k env steps, exclusive times, for each rung of the "
+                "ladder from v1 (before) to the default (after); update_by_network is timed apart on each run's "
+                "last rollout buffer (forward and backward of each network alone, scaled to the run's updates), "
+                "so its sum need not equal the in-loop update",
+        "note": "torch.compile of the keypoint extractor is faster per call but costs its compile time in every "
+                "run and on every new batch shape (rollout, minibatch, evaluation), so the default stays eager",
         "torch_threads": 1, "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU",
-        "command": "python benchmarks/train_profile.py " + " ".join(
-            [f"--configs {' '.join(args.configs)}", f"--rewards {' '.join(args.rewards)}",
-             f"--steps {args.steps}"] + ([f"--out {args.out}"] if args.out else []))}}
+        "command": "python benchmarks/train_profile.py"
+                   + (f" --steps {args.steps}" if args.steps != 40_000 else "")
+                   + (f" --rewards {' '.join(args.rewards)}" if args.rewards != ["zsrm"] else "")
+                   + (f" --curiosity-steps {args.curiosity_steps}" if args.curiosity_steps != 20_000 else "")
+                   + (f" --out {args.out}" if args.out else "")}}
     if args.out:
         with open(args.out, "w") as f:
             json.dump(result, f, indent=2)

@@ -107,19 +107,30 @@ def test_profile_timers_count_exclusive_time_under_their_root(monkeypatch):
                                     "evaluation": 3, "rollout_other": 9 - 1 - 5}
 
 
+def test_profile_ladder_goes_from_v1_to_the_default():
+    import train_profile
+
+    rungs = train_profile.ladder_settings()
+    assert rungs[0][1] == PRESETS["v1"]
+    assert TrainConfig(**rungs[-1][1]) == TrainConfig()  # the last rung is the default
+
+
 def test_profile_and_speed_benchmarks_run_a_tiny_train(tmp_path, monkeypatch):
     import ppo_speed
     import train_profile
 
-    monkeypatch.setitem(PRESETS, "tiny-new", {**TINY, "eval_every": 128, "checkpoint_every": 128})
-    monkeypatch.setitem(PRESETS, "tiny-old", {**PRESETS["v1"], **TINY, "eval_every": 128, "checkpoint_every": 128})
-    run = train_profile.profile("tiny-new", "oracle", 256, "push_close")
-    parts = run["seconds_per_10k_env_steps"]
-    for part in ("scenes", "rendering", "vlm_trunk", "reward", "policy_forward", "inverse_dynamics", "evaluation",
-                 "checkpoint", "update/vlm_keypoints/forward", "update/pixel_cnn/backward", "update/heads/forward"):
-        assert part in parts, part
-    assert all(v >= 0 for k, v in parts.items() if k != "update/other"), parts
-    assert run["env_steps"] == 256 and run["ppo_updates"] >= 1
+    tiny = {**TINY, "eval_every": 128, "checkpoint_every": 128}
+    monkeypatch.setitem(PRESETS, "tiny-new", tiny)
+    monkeypatch.setitem(PRESETS, "tiny-old", {**PRESETS["v1"], **tiny})
+    for reward in ("oracle", "curiosity"):
+        run = train_profile.profile(tiny, reward, 256, "push_close")
+        parts = run["seconds_per_10k_env_steps"]
+        for part in ("scenes", "rendering", "vlm_trunk", "policy_forward", "inverse_dynamics", "evaluation",
+                     "checkpoint", "update", "reward" if reward == "oracle" else "curiosity_update"):
+            assert part in parts, part
+        assert all(v >= 0 for v in parts.values()), parts
+        assert {"vlm_keypoints/forward", "pixel_cnn/backward", "heads/forward"} <= set(run["update_by_network_per_10k_env_steps"])
+        assert run["env_steps"] == 256 and run["ppo_updates"] >= 1
     out = tmp_path / "speed.json"
     result = ppo_speed.main(["--goal", "push_close", "--steps", "256", "--config", "tiny-new",
                              "--baseline", "tiny-old", "--out", str(out)])
@@ -129,3 +140,18 @@ def test_profile_and_speed_benchmarks_run_a_tiny_train(tmp_path, monkeypatch):
                                                / written["configs"]["tiny-old"]["train_steps_per_s"])
     assert written["env_fraction"] == pytest.approx(written["configs"]["tiny-new"]["env_fraction"])
     assert written["configs"]["tiny-old"]["train_config"]["action_repeat"] == 2
+
+
+def test_profile_times_the_code_levers_against_the_simple_way():
+    import train_profile
+
+    levers = train_profile.micro(compile_extractor=False)
+    assert len(levers) == 3 and all(v["simple_ms"] > 0 and v["fast_ms"] > 0 for v in levers.values())
+
+
+def test_old_spatial_softmax_matches_the_fast_one():
+    import train_profile
+    from zsrm.rl.features import SpatialSoftmax
+
+    softmax, maps = SpatialSoftmax(8, 8), torch.randn(4, 6, 8, 8)
+    torch.testing.assert_close(softmax(maps), train_profile.old_spatial_softmax(softmax, maps), rtol=1e-5, atol=1e-5)

@@ -47,11 +47,12 @@ def test_a_pinned_shipped_model_loads_only_as_that_version(tmp_path, monkeypatch
 
 
 def test_the_student_that_trained_the_learning_runs_is_kept():
-    """results/rl's zsrm trials pin the student trained before the box: it ships under retired/."""
+    """results/rl's zsrm trials pin the student they trained with: the v1 trials (results/rl/v1/) the
+    one trained before the box, which ships under retired/; the others the shipped one."""
     from zsrm.fullmodel import load_reward_backbone
 
     pins = {json.loads(p.read_text())["config"]["reward_model"]
-            for p in (Path(__file__).parent.parent / "results" / "rl" / "trials").glob("*-zsrm-*.json")}
+            for p in (Path(__file__).parent.parent / "results" / "rl").glob("**/trials/*-zsrm-*.json")}
     assert pins and all(p.startswith("student@") for p in pins)
     for pin in pins:
         load_reward_backbone(pin)
