@@ -41,22 +41,34 @@ results: setup
 		--out results/reward_eval.json
 	$(PY) benchmarks/reward_speed.py --vlm runs/zsrm/vlm --student runs/zsrm/student --out results/reward_speed.json
 	OMP_NUM_THREADS=1 $(PY) benchmarks/robustness.py --out results/robustness.json
-	OMP_NUM_THREADS=1 $(PY) benchmarks/ppo_speed.py --steps 8192 --out results/ppo_speed.json
-	# Learning from pixels (Figure 6 rewards oracle/zsrm/random; hours on 2 cores: 18 PPO runs of 300k steps),
-	# with the student shipped before the box (kept under zsrm/fullmodel/weights/retired/), as measured
-	$(VENV)/bin/zsrm sweep --tasks push_close place_right stack --rewards oracle zsrm random --seeds 0 1 2 \
-		--reward-model student@978a53be9a61 --out results/rl/learning.json
+	# Training speed: each lever from v1 to the default, part by part; then the whole train loop against v1
+	OMP_NUM_THREADS=1 $(PY) benchmarks/train_profile.py --out results/rl/profile.json
+	OMP_NUM_THREADS=1 $(PY) benchmarks/ppo_speed.py --out results/ppo_speed.json
+	# Learning from pixels (oracle/zsrm/random, 3 tasks x 3 seeds of 300k steps: about 70 min on 2 cores),
+	# the default configuration and the shipped student
+	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close --rewards oracle zsrm random --seeds 0 1 2 \
+		--out results/rl/learning.json
 	# Figures 4 and 6 (baselines base, vice, curiosity and the pendulum; the learning runs above are part of it)
 	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity random \
-		--seeds 0 1 2 --reward-model student@978a53be9a61 --out results/rl/summary.json
-	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity random \
-		--seeds 0 1 2 3 4 --reward-model student@978a53be9a61 --out results/rl/summary.json --gather-only
+		--seeds 0 1 2 --out results/rl/summary.json
 	$(VENV)/bin/zsrm plot --summary results/rl/summary.json --figure6 results/rl/figure6.png --figure4 results/rl/figure4.png
+	# The same before 2026-12-04 (results/rl/v1/): the v1 configuration and the student shipped before the box
+	# (kept under zsrm/fullmodel/weights/retired/); 22-25 core-minutes a trial
+	$(VENV)/bin/zsrm sweep --config v1 --root runs/rl-v1 --tasks push_close place_right stack --rewards oracle zsrm random \
+		--seeds 0 1 2 --reward-model student@978a53be9a61 --out results/rl/v1/learning.json
+	$(VENV)/bin/zsrm sweep --config v1 --root runs/rl-v1 --tasks stack place_right push_close pendulum \
+		--rewards oracle zsrm base vice curiosity random --seeds 0 1 2 --reward-model student@978a53be9a61 \
+		--out results/rl/v1/summary.json
+	$(VENV)/bin/zsrm sweep --config v1 --root runs/rl-v1 --tasks stack place_right push_close pendulum \
+		--rewards oracle zsrm base vice curiosity random --seeds 0 1 2 3 4 --reward-model student@978a53be9a61 \
+		--out results/rl/v1/summary.json --gather-only
+	$(VENV)/bin/zsrm plot --summary results/rl/v1/summary.json --figure6 results/rl/v1/figure6.png \
+		--figure4 results/rl/v1/figure4.png
 	# Does the stack policy trained on the student hover instead of stacking? (results/rl/student_v1/
 	# holds the same diagnostics of the earlier student, which did, and is kept for the record)
-	$(PY) benchmarks/reward_hacking.py runs/rl/stack-zsrm-0/policy --episodes 20 --out results/rl/reward_hacking_stack.json
+	$(PY) benchmarks/reward_hacking.py runs/rl-v1/stack-zsrm-0/policy --episodes 20 --out results/rl/reward_hacking_stack.json
 	# Table 2 (hours on 2 cores: 18 PPO runs of 200k steps, then rollouts, distillation, 36 x 50 x 2 episodes)
-	$(VENV)/bin/zsrm multitask-policies --steps 200000 --out results/multitask/policies.json
+	$(VENV)/bin/zsrm multitask-policies --config v1 --steps 200000 --out results/multitask/policies.json
 	$(VENV)/bin/zsrm multitask-rollouts --episodes 50 --out data/multitask/rollouts
 	# (the cpu schedule's language policy reads its goal embeddings centred on the training goals')
 	$(VENV)/bin/zsrm distill --schedule cpu --policies language primitive none grounded \
@@ -86,7 +98,7 @@ results: setup
 		--out results/multitask/goal_probe_centred_seed2.json
 	# Table 2 in choice scenes: the stacking tasks' scenes get a third block beside the moved one
 	# (the base must be found by colour); their policies train 100k more steps there from the ones above
-	$(VENV)/bin/zsrm multitask-policies --choice --steps 100000 --root runs/multitask/policies-choice \
+	$(VENV)/bin/zsrm multitask-policies --config v1 --choice --steps 100000 --root runs/multitask/policies-choice \
 		--out results/multitask/choice/policies.json
 	OMP_NUM_THREADS=1 $(PY) benchmarks/task_policy_distractor.py --choice-policies results/multitask/choice/task_policies \
 		--out results/multitask/choice/task_policy_distractor.json

@@ -155,3 +155,19 @@ def test_old_spatial_softmax_matches_the_fast_one():
 
     softmax, maps = SpatialSoftmax(8, 8), torch.randn(4, 6, 8, 8)
     torch.testing.assert_close(softmax(maps), train_profile.old_spatial_softmax(softmax, maps), rtol=1e-5, atol=1e-5)
+
+
+def test_a_policy_saved_before_the_views_existed_reads_64_px_views(tmp_path):
+    from zsrm.rl.evaluate import rollout
+    from zsrm.rl.policy import PolicyBundle
+    from zsrm.rl.ppo import train
+
+    cfg = preset("v1", goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128,
+                 **{**TINY, "n_steps": 16})
+    train(cfg, tmp_path, progress=False)
+    saved = json.loads((tmp_path / "policy" / "config.json").read_text())["config"]
+    assert "trunk_size" not in saved and "pixel_size" not in saved  # as every policy made before them
+    bundle = PolicyBundle.load(tmp_path / "policy")
+    assert (bundle.cfg.trunk_size, bundle.cfg.pixel_size) == (0, 0)
+    assert bundle.policy.observation_space[FEATURES_KEY].shape[1:] == (16, 16)
+    assert len(rollout(tmp_path / "policy", episodes=2)["episode_rewards"]) == 2

@@ -11,6 +11,7 @@ import os
 import platform
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 from zsrm.pipeline import narrow
 from zsrm.pipeline.learn import Sweep
@@ -59,6 +60,7 @@ class MultitaskPolicies:
     vlm: str = "scene"  # the VLM whose image trunk the policies read
     choice: bool = False  # the stacking tasks in choice scenes (zsrm train --choice), each from its --init-root policy
     init_root: str = KEPT_POLICIES  # with --choice: the two-block task policies to start from
+    config: Literal["cpu", "paper", "v1"] = "cpu"  # TrainConfig preset of the policies (v1: before 2026-12-04)
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
     def run(self) -> int:
@@ -73,7 +75,8 @@ class MultitaskPolicies:
             train, init_root = {**train, "choice": True}, self.init_root
         sweep = Sweep(tasks=tuple(goals), rewards=("zsrm",), seeds=(self.seed,), root=self.root,
                       steps=self.steps, num_cpus=self.num_cpus, address=self.address, vlm=self.vlm,
-                      reward_model=self.reward_model, out=self.out, init_root=init_root, train=train)
+                      reward_model=self.reward_model, out=self.out, init_root=init_root, config=self.config,
+                      train=train)
         status = sweep.run()
         # Beside the kept trial summaries, as the sweep keeps them: the rollouts need the weights.
         keep = kept_policies(self.out)

@@ -94,6 +94,9 @@ class TrainConfig:
     # Settings added after runs were committed: written only when changed, so that a finished
     # run made before they existed still matches its configuration.
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0}
+    # What a file without the setting means, where that is not the default: a run made before the
+    # setting existed (read by from_dict and by zsrm.vlm.registry.parse_fields, e.g. a saved policy)
+    LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0}
 
     def __post_init__(self):
         if self.reward not in REWARDS:
@@ -153,8 +156,7 @@ class TrainConfig:
         unknown = set(d) - known
         if unknown:
             raise ValueError(f"unknown training settings: {', '.join(sorted(unknown))}")
-        # to_dict leaves out a setting at the value it had before the setting existed
-        return cls(**{**{k: v for k, v in cls.ADDED.items() if k in ("trunk_size", "pixel_size")}, **d})
+        return cls(**{**cls.LEGACY_DEFAULTS, **d})
 
 
 # The pendulum's VLM by default: the scene VLM taught the pole's pose in words (Figure 4).

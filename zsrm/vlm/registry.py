@@ -113,6 +113,8 @@ def parse_fields(cls: type | dict, data: Any, where: str):
         raise ZsrmFileError(f"{where}: missing key{'s' * (len(missing) > 1)} {', '.join(map(repr, missing))}")
     hints = typing.get_type_hints(cls)
     values = {k: _check_value(hints[k], v, where, k) for k, v in data.items()}
+    # a file written before a field existed means the value the class names for it, if any
+    values = {**getattr(cls, "LEGACY_DEFAULTS", {}), **values}
     try:
         return cls(**values)
     except (ValueError, TypeError) as err:
