@@ -171,3 +171,15 @@ def test_a_policy_saved_before_the_views_existed_reads_64_px_views(tmp_path):
     assert (bundle.cfg.trunk_size, bundle.cfg.pixel_size) == (0, 0)
     assert bundle.policy.observation_space[FEATURES_KEY].shape[1:] == (16, 16)
     assert len(rollout(tmp_path / "policy", episodes=2)["episode_rewards"]) == 2
+
+
+def test_a_run_records_its_seconds_and_a_sweep_adds_them_up(tmp_path):
+    from zsrm.rl.ppo import train
+    from zsrm.rl.sweep import core_hours
+
+    summary = train(TrainConfig(goal="push_close", reward="oracle", steps=256, eval_every=128, checkpoint_every=128,
+                                **TINY), tmp_path, progress=False)
+    assert summary["wall_s"] >= summary["curve"][-1]["wall_s"] > 0
+    older = {"curve": [{"wall_s": 7200.0}]}  # written before wall_s was recorded: its last evaluation's time
+    assert core_hours([{"wall_s": 3600.0}, older, {"curve": []}]) == 3.0
+    assert core_hours([tmp_path / "summary.json"]) == round(summary["wall_s"] / 3600, 2)

@@ -103,7 +103,7 @@ class Sweep:
 
     def run(self) -> int:
         from zsrm.evaluation.learning_curves import plot_learning_curves
-        from zsrm.rl.sweep import gather, keep_trial_summaries, sweep
+        from zsrm.rl.sweep import core_hours, gather, keep_trial_summaries, sweep
 
         unknown = set(self.rewards) - set(REWARDS)
         if unknown:
@@ -121,7 +121,7 @@ class Sweep:
             print("no finished trials yet")
             return 0
         summary = gather(kept)
-        write_json(out, {**summary, "meta": self.meta(len(kept), len(trials))})
+        write_json(out, {**summary, "meta": {**self.meta(len(kept), len(trials)), "core_hours": core_hours(kept)}})
         plot_learning_curves(summary, out.with_suffix(".png"))
         for task, rewards in summary.items():
             print(task + ": " + ", ".join(f"{r} {v['final_mean']:.1f}+-{v['final_se']:.1f} ({v['seeds']} seeds)"

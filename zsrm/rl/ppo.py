@@ -163,7 +163,7 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     venv.close()
     PolicyBundle(model.policy, cfg).save(out / "policy")
     save_checkpoint(out / "checkpoint", model, cfg, callback.env_steps(), rows, extra_modules)
-    return write_summary(cfg, out, final, rows, callback.env_steps())
+    return write_summary(cfg, out, final, rows, callback.env_steps(), wall_s=time.time() - callback.t0)
 
 
 def start_from(model: PPO, folder: str) -> None:
@@ -201,16 +201,20 @@ def rewarded_env(cfg: TrainConfig, out: Path, done_steps: int):
 
 def finish_random(cfg: TrainConfig, out: Path) -> dict:
     """The uniform random policy's oracle metric (the `random` baseline of the results)."""
+    t0 = time.time()
     probe = make_vec(cfg, 1, 0)
     act = random_actions(probe.action_space, cfg.seed)
     probe.close()
     final = evaluate(act, cfg, FINAL_EPISODES, cfg.seed)
-    return write_summary(cfg, out, final, [], 0)
+    return write_summary(cfg, out, final, [], 0, wall_s=time.time() - t0)
 
 
-def write_summary(cfg: TrainConfig, out: Path, final: dict, rows: list[dict], env_steps: int) -> dict:
+def write_summary(cfg: TrainConfig, out: Path, final: dict, rows: list[dict], env_steps: int,
+                  wall_s: float | None = None) -> dict:
+    """``summary.json``; ``wall_s``: the run's seconds, the parts before a resume included."""
     summary = {"config": cfg.to_dict(), "env_steps": env_steps, "final_mean": final["mean"], "final_se": final["se"],
                "final_success_rate": final["success_rate"], "final_episodes": len(final["episode_rewards"]),
-               "final_episode_rewards": final["episode_rewards"], "curve": rows}
+               "final_episode_rewards": final["episode_rewards"], "curve": rows,
+               **({"wall_s": round(wall_s, 1)} if wall_s is not None else {})}
     write_json(out / "summary.json", summary)
     return summary

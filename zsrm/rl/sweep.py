@@ -157,6 +157,17 @@ def gather(summaries) -> dict:
     return out
 
 
+def core_hours(summaries) -> float:
+    """Core-hours of finished runs (one core each): each summary's ``wall_s``, or for a summary
+    written before it was recorded, the time of its last evaluation (a few percent short)."""
+    seconds = 0.0
+    for summary in summaries:
+        if not isinstance(summary, dict):
+            summary = json.loads(Path(summary).read_text())
+        seconds += summary.get("wall_s", summary["curve"][-1]["wall_s"] if summary.get("curve") else 0.0)
+    return round(seconds / 3600, 2)
+
+
 def keep_trial_summaries(root: str | Path, dest: str | Path, trials) -> list[Path]:
     """Copy the finished trials' ``summary.json`` (curve included, a few kB) to
     ``dest/<name>.json``, the small files a results folder keeps under version control; returns
