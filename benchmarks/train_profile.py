@@ -294,9 +294,9 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rewards", nargs="+", default=["zsrm"], help="rewards to profile each rung with")
     parser.add_argument("--goal", default="stack")
-    parser.add_argument("--steps", type=int, default=40_000, help="env steps per profiled run")
+    parser.add_argument("--steps", type=int, default=20_000, help="env steps per profiled run")
     parser.add_argument("--rungs", type=int, default=len(LADDER), help="profile the first N rungs of the ladder")
-    parser.add_argument("--curiosity-steps", type=int, default=20_000,
+    parser.add_argument("--curiosity-steps", type=int, default=10_000,
                         help="also profile the curiosity reward (ICM) on the first and last rung, this many env steps")
     parser.add_argument("--no-compile", action="store_true", help="skip timing torch.compile (about 20 s to compile)")
     parser.add_argument("--out", default=None)
@@ -325,9 +325,9 @@ def main(argv=None):
                 "run and on every new batch shape (rollout, minibatch, evaluation), so the default stays eager",
         "torch_threads": 1, "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU",
         "command": "python benchmarks/train_profile.py"
-                   + (f" --steps {args.steps}" if args.steps != 40_000 else "")
+                   + (f" --steps {args.steps}" if args.steps != 20_000 else "")
                    + (f" --rewards {' '.join(args.rewards)}" if args.rewards != ["zsrm"] else "")
-                   + (f" --curiosity-steps {args.curiosity_steps}" if args.curiosity_steps != 20_000 else "")
+                   + (f" --curiosity-steps {args.curiosity_steps}" if args.curiosity_steps != 10_000 else "")
                    + (f" --out {args.out}" if args.out else "")}}
     if args.out:
         with open(args.out, "w") as f:

@@ -183,3 +183,12 @@ def test_a_run_records_its_seconds_and_a_sweep_adds_them_up(tmp_path):
     older = {"curve": [{"wall_s": 7200.0}]}  # written before wall_s was recorded: its last evaluation's time
     assert core_hours([{"wall_s": 3600.0}, older, {"curve": []}]) == 3.0
     assert core_hours([tmp_path / "summary.json"]) == round(summary["wall_s"] / 3600, 2)
+
+
+def test_a_flat_map_gives_keypoints_and_finite_gradients():
+    from zsrm.rl.features import SpatialSoftmax
+
+    softmax = SpatialSoftmax(8, 8)
+    maps = torch.zeros(2, 3, 8, 8, requires_grad=True)  # a frame the trunk sees nothing in
+    softmax(maps).sum().backward()
+    assert torch.isfinite(maps.grad).all() and torch.isfinite(softmax.log_temperature.grad)

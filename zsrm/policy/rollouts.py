@@ -24,7 +24,6 @@ from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from zsrm.data.shards import ShardFolder, load_npz, read_manifest, save_npz
 from zsrm.envs.rollout import run_vec_episodes
-from zsrm.rl.features import IMAGE_KEY
 from zsrm.tasks.catalogue import TRAIN_TASKS
 from zsrm.tasks.language import parse_goal
 
@@ -90,16 +89,18 @@ class RolloutConfig:
 
 
 class DecisionRecorder(VecEnvWrapper):
-    """Keeps every decision of a vectorised episode: the frames (``IMAGE_KEY``) the policy saw,
-    its actions and the dones, so each env's episode can be cut where it ended."""
+    """Keeps every decision of a vectorised episode: the camera's frames at its own size (the
+    policy may see them shrunk), its actions and the dones, so each env's episode can be cut
+    where it ended. Wrap the camera's VecEnv, inside the policy's view."""
 
-    def __init__(self, venv):
+    def __init__(self, venv, camera: str):
         super().__init__(venv)
+        self.camera = camera
         self.frames, self.actions, self.dones, self.last = [], [], [], None
 
     def reset(self):
         obs = self.venv.reset()
-        self.last = obs[IMAGE_KEY]
+        self.last = obs[self.camera]
         return obs
 
     def step_async(self, actions):
@@ -110,7 +111,7 @@ class DecisionRecorder(VecEnvWrapper):
     def step_wait(self):
         obs, rewards, dones, infos = self.venv.step_wait()
         self.dones.append(np.array(dones))
-        self.last = obs[IMAGE_KEY]
+        self.last = obs[self.camera]
         return obs, rewards, dones, infos
 
     def episodes(self) -> list[dict]:
@@ -119,7 +120,7 @@ class DecisionRecorder(VecEnvWrapper):
         out = []
         for e in range(dones.shape[1]):
             end = int(np.argmax(dones[:, e])) + 1 if dones[:, e].any() else len(dones)
-            out.append({"frames": np.stack([f[e] for f in self.frames[:end]]).transpose(0, 2, 3, 1),
+            out.append({"frames": np.stack([f[e] for f in self.frames[:end]]),
                         "actions": np.stack([a[e] for a in self.actions[:end]])})
         return out
 
@@ -145,13 +146,14 @@ def collect_task(policy: str | Path, goal: str, episodes: int, envs: int) -> tup
     for start in range(0, episodes, envs):
         n, seed = min(envs, episodes - start), COLLECT_SEED + 1000 * index + start
         torch.manual_seed(seed)  # the policy samples its actions: same seed, same data
-        venv = DecisionRecorder(policy_view(make_vec(bundle.cfg, n, seed), vlm, bundle.cfg))
+        recorder = DecisionRecorder(make_vec(bundle.cfg, n, seed), goal_camera(goal))
+        venv = policy_view(recorder, vlm, bundle.cfg)
         try:
             result = run_vec_episodes(venv, lambda obs: bundle.act(obs, deterministic=bundle.cfg.eval_deterministic))
         finally:
             venv.close()
         rewards += result["episode_rewards"]
-        parts += venv.episodes()
+        parts += recorder.episodes()
     arrays = {"frames": np.concatenate([p["frames"] for p in parts]),
               "actions": np.concatenate([p["actions"] for p in parts]),
               "episode": np.concatenate([np.full(len(p["actions"]), i, np.int32) for i, p in enumerate(parts)]),

@@ -122,10 +122,11 @@ class SpatialSoftmax(nn.Module):
 
     def forward(self, maps: torch.Tensor) -> torch.Tensor:
         flat = maps.flatten(2)
-        # mean and (unbiased) std once for both uses: half the time of calling std() twice
+        # mean and (unbiased) std once for both uses: half the time of calling std() twice. The
+        # variance's floor keeps the gradient finite on a flat map (a frame the trunk sees nothing in)
         mean = flat.mean(dim=-1, keepdim=True)
         centred = flat - mean
-        std = (centred.square().sum(dim=-1, keepdim=True) / (flat.shape[-1] - 1)).sqrt() + 1e-6
+        std = (centred.square().sum(dim=-1, keepdim=True) / (flat.shape[-1] - 1) + 1e-12).sqrt() + 1e-6
         attention = torch.softmax(centred / (std * self.log_temperature.exp()), dim=-1)
         peak = ((flat.amax(dim=-1, keepdim=True) - mean) / std).squeeze(-1)
         points = attention @ self.grid  # (N, K, 2)
