@@ -18,7 +18,7 @@ from zsrm.tasks.catalogue import TEST_COLOUR, TRAIN_COLOURS, TRAIN_TASKS, choice
 
 from test_distill import blue_pixels, run_benchmark
 
-TINY = dict(steps=128, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, eval_every=128,
+TINY = dict(steps=128, n_envs=2, n_steps=32, action_repeat=2, batch_size=32, n_epochs=1, eval_episodes=2, eval_every=128,
             checkpoint_every=128, keypoints=4)
 STACK = TRAIN_TASKS[0]  # a red block on top of a green block
 PLACE = TRAIN_TASKS[12]  # a red block on the right of a green block
@@ -169,11 +169,13 @@ def test_a_test_goals_choice_scenes_share_its_seeds_between_both_third_colours(m
 def test_the_third_block_counts_control_steps_with_the_moved_block_on_it():
     from zsrm.evaluation.multitask import OnThirdBlock
 
-    venv = OnThirdBlock(make_vec(TrainConfig(goal=STACK.text, choice=True), 1, 0), "red", "yellow")
+    cfg = TrainConfig(goal=STACK.text, choice=True)
+    venv = OnThirdBlock(make_vec(cfg, 1, 0), "red", "yellow")
     venv.reset()
     env = venv.venv.envs[0].unwrapped
     yellow = env.object_positions()["yellow"]
     env._set_object("red", yellow + (0.0, 0.0, 0.06))  # red stacked on the third block
     _, _, _, infos = venv.step(np.zeros((1, 3)))
-    assert venv.repeat == 2 and infos[0]["on_third"] == 2 and infos[0]["oracle_steps"] == 0
+    assert venv.repeat == cfg.action_repeat > 1
+    assert infos[0]["on_third"] == cfg.action_repeat and infos[0]["oracle_steps"] == 0
     venv.close()

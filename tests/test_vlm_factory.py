@@ -51,8 +51,9 @@ def test_the_student_that_trained_the_learning_runs_is_kept():
     one trained before the box, which ships under retired/; the others the shipped one."""
     from zsrm.fullmodel import load_reward_backbone
 
+    results = Path(__file__).parent.parent / "results" / "rl"
     pins = {json.loads(p.read_text())["config"]["reward_model"]
-            for p in (Path(__file__).parent.parent / "results" / "rl").glob("**/trials/*-zsrm-*.json")}
+            for folder in (results / "trials", results / "v1" / "trials") for p in folder.glob("*-zsrm-*.json")}
     assert pins and all(p.startswith("student@") for p in pins)
     for pin in pins:
         load_reward_backbone(pin)
