@@ -5,7 +5,7 @@ configuration: a stage finished with the same configuration is skipped, a killed
 (every long stage below resumes from its own checkpoints). One progress view lists the stages
 and the time each took.
 
-* ``demo`` (``make demo``, offline, about 25-30 minutes on 2 cores): the shipped scene VLM and
+* ``demo`` (``make demo``, offline, under 10 minutes on 2 cores): the shipped scene VLM and
   student reward model; one policy trained with the zsrm reward on one task against a random
   policy; the committed results of the ``cpu`` scale beside it.
 * ``cpu``: builds every model from scratch on this machine (pretrain the scene VLM, collect and
