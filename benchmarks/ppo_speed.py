@@ -16,7 +16,6 @@ run. Prints and writes (``--out``):
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import tempfile
@@ -27,6 +26,8 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+
+from zsrm.vlm.files import write_json  # noqa: E402
 
 
 def train_steps_per_s(cfg) -> tuple[float, int]:
@@ -95,9 +96,7 @@ def main(argv=None):
     print(f"speedup {result['speedup']:.2f} ({args.config} against {args.baseline}), "
           f"env_fraction {result['env_fraction']:.2f}")
     if args.out:
-        with open(args.out, "w") as f:
-            json.dump(result, f, indent=2)
-            f.write("\n")
+        write_json(args.out, result)
     return result
 
 

@@ -25,7 +25,6 @@ Levers in the code, which every rung has, are timed against the simple way besid
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import tempfile
@@ -38,6 +37,8 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+
+from zsrm.vlm.files import write_json  # noqa: E402
 
 # v1 to the default, one lever a rung (each rung's settings on top of the rungs before it)
 LADDER = (
@@ -330,12 +331,9 @@ def main(argv=None):
                    + (f" --curiosity-steps {args.curiosity_steps}" if args.curiosity_steps != 10_000 else "")
                    + (f" --out {args.out}" if args.out else "")}}
     if args.out:
-        with open(args.out, "w") as f:
-            json.dump(result, f, indent=2)
-            f.write("\n")
+        write_json(args.out, result)
     return result
 
 
 if __name__ == "__main__":
-    np.set_printoptions(precision=3)
     main()
