@@ -192,3 +192,28 @@ def test_a_flat_map_gives_keypoints_and_finite_gradients():
     maps = torch.zeros(2, 3, 8, 8, requires_grad=True)  # a frame the trunk sees nothing in
     softmax(maps).sum().backward()
     assert torch.isfinite(maps.grad).all() and torch.isfinite(softmax.log_temperature.grad)
+
+
+def test_an_evaluator_kept_for_a_run_plays_the_episodes_of_a_fresh_evaluation():
+    from zsrm.rl.evaluate import Evaluator, evaluate
+
+    cfg = TrainConfig(goal="stack", reward="oracle", **TINY)
+
+    def recording(seen):
+        def act(obs):  # acts on what it sees, and keeps it
+            frames = next(iter(obs.values())).reshape(3, -1).astype(np.float64)
+            seen.append(frames.mean(1))
+            return np.tanh(frames[:, :3] / 64.0 - 2.0).astype(np.float32)
+        return act
+
+    seen_fresh, seen_first, seen_again = [], [], []
+    fresh = evaluate(recording(seen_fresh), cfg, 3, seed=1)
+    evaluator = Evaluator(cfg, 3, seed=1)
+    try:
+        first, again = evaluator(recording(seen_first)), evaluator(recording(seen_again))
+    finally:
+        evaluator.close()
+    assert len(seen_fresh) == cfg.episode_decisions
+    for result, seen in ((first, seen_first), (again, seen_again)):
+        assert result["episode_rewards"] == fresh["episode_rewards"]
+        assert np.array_equal(np.stack(seen), np.stack(seen_fresh))

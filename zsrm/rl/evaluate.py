@@ -17,8 +17,9 @@ import numpy as np
 
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.rl.config import TrainConfig
-from zsrm.rl.envs import goal_camera, is_pendulum, make_vec
-from zsrm.vlm.files import atomic_path
+from zsrm.rl.envs import make_vec
+from zsrm.rl.goals import goal_camera, is_pendulum
+from zsrm.common.files import atomic_path
 
 EVAL_SEED = 1_000_000  # evaluation envs: seeds far from the training envs'
 
@@ -46,15 +47,32 @@ def evaluate(act, cfg: TrainConfig, episodes: int, seed: int, spread: str = "see
     """Mean and standard error of the oracle episode reward over ``episodes`` seeded episodes,
     one env each. ``wrap`` turns the image VecEnv into what ``act`` reads (e.g.
     :func:`~zsrm.rl.features.policy_view`)."""
-    venv = make_vec(cfg, episodes, eval_seed(seed), spread)
-    if wrap is not None:
-        venv = wrap(venv)
+    evaluator = Evaluator(cfg, episodes, seed, spread, wrap)
     try:
-        out = run_vec_episodes(venv, act, key="oracle_reward" if is_pendulum(cfg.goal) else "oracle_steps")
+        return evaluator(act)
     finally:
-        venv.close()
-    mean, se = mean_se(out["episode_rewards"])
-    return {"mean": mean, "se": se, "success_rate": float(np.mean(out["successes"])), **out}
+        evaluator.close()
+
+
+class Evaluator:
+    """:func:`evaluate` on envs built once and reseeded before each call, so every call plays
+    the same seeded episodes as a fresh :func:`evaluate`. Training evaluates every
+    ``eval_every`` steps: building the scenes' renderers each time cost more than playing."""
+
+    def __init__(self, cfg: TrainConfig, episodes: int, seed: int, spread: str = "seen", wrap=None):
+        self.cfg, self.seed = cfg, eval_seed(seed)
+        self.venv = make_vec(cfg, episodes, self.seed, spread)
+        if wrap is not None:
+            self.venv = wrap(self.venv)
+
+    def __call__(self, act) -> dict:
+        self.venv.seed(self.seed)  # the next reset seeds every env as make_vec did
+        out = run_vec_episodes(self.venv, act, key="oracle_reward" if is_pendulum(self.cfg.goal) else "oracle_steps")
+        mean, se = mean_se(out["episode_rewards"])
+        return {"mean": mean, "se": se, "success_rate": float(np.mean(out["successes"])), **out}
+
+    def close(self) -> None:
+        self.venv.close()
 
 
 def random_actions(action_space, seed: int) -> Callable[[dict], np.ndarray]:

@@ -27,12 +27,13 @@ from zsrm.rewards import VecZeroShotReward
 from zsrm.rl.auxiliary import InverseDynamicsAux
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.curiosity import ICMUpdate, VecCuriosity
-from zsrm.rl.envs import goal_camera, make_reward, make_vec, task_entry
-from zsrm.rl.evaluate import evaluate, random_actions
+from zsrm.rl.envs import make_reward, make_vec
+from zsrm.rl.goals import goal_camera, task_entry
+from zsrm.rl.evaluate import Evaluator, evaluate, random_actions
 from zsrm.rl.features import policy_view
 from zsrm.rl.policy import PolicyBundle, load_checkpoint, policy_kwargs, save_checkpoint
 from zsrm.vlm import load_vlm
-from zsrm.vlm.files import atomic_path, read_json, write_json
+from zsrm.common.files import atomic_path, read_json, write_json
 
 EVAL_FIELDS = ("env_steps", "mean", "se", "success_rate", "train_reward", "wall_s")
 FINAL_EPISODES = 30
@@ -57,6 +58,7 @@ class EvalAndCheckpoint(BaseCallback):
         self.next_ckpt = self.next_eval - cfg.eval_every + cfg.checkpoint_every
         self.rewards: list[float] = []
         self.t0 = time.time() - (rows[-1]["wall_s"] if rows else 0.0)
+        self.evaluator = None  # built at the first evaluation, kept for the run
 
     def env_steps(self) -> int:
         return int(self.num_timesteps * self.cfg.action_repeat)
@@ -77,10 +79,16 @@ class EvalAndCheckpoint(BaseCallback):
             while self.next_ckpt <= self.env_steps():
                 self.next_ckpt += self.cfg.checkpoint_every
 
+    def _on_training_end(self) -> None:
+        if self.evaluator is not None:
+            self.evaluator.close()
+            self.evaluator = None
+
     def evaluate(self):
         cfg = self.cfg
-        result = evaluate(policy_act(self.model, cfg.eval_deterministic), cfg, cfg.eval_episodes, cfg.seed,
-                          wrap=lambda v: policy_view(v, self.vlm, cfg))
+        if self.evaluator is None:
+            self.evaluator = Evaluator(cfg, cfg.eval_episodes, cfg.seed, wrap=lambda v: policy_view(v, self.vlm, cfg))
+        result = self.evaluator(policy_act(self.model, cfg.eval_deterministic))
         # Mean reward per decision over the interval, times the decisions of an episode.
         train_reward = float(np.mean(self.rewards) * self.cfg.episode_decisions) if self.rewards else 0.0
         self.rewards = []
