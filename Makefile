@@ -66,7 +66,7 @@ results: setup
 		--figure4 results/rl/v1/figure4.png
 	# Does the stack policy trained on the student hover instead of stacking? (results/rl/student_v1/
 	# holds the same diagnostics of the earlier student, which did, and is kept for the record)
-	$(PY) benchmarks/reward_hacking.py runs/rl-v1/stack-zsrm-0/policy --episodes 20 --out results/rl/reward_hacking_stack.json
+	$(PY) probes/reward_hacking.py runs/rl-v1/stack-zsrm-0/policy --episodes 20 --out results/rl/reward_hacking_stack.json
 	# Table 2 (hours on 2 cores: 18 PPO runs of 200k steps, then rollouts, distillation, 36 x 50 x 2 episodes)
 	$(VENV)/bin/zsrm multitask-policies --config v1 --steps 200000 --out results/multitask/policies.json
 	$(VENV)/bin/zsrm multitask-rollouts --episodes 50 --out data/multitask/rollouts
@@ -93,15 +93,15 @@ results: setup
 		results/multitask/table2_centred_seed2.json results/multitask/table2_centred_seed3.json \
 		--out results/multitask/table2_centred_seeds.json
 	# does the centred language policy follow the goal's colours or its relation? (stacking scenes)
-	$(PY) benchmarks/distill_goal_probe.py --policies runs/multitask/distill --out results/multitask/goal_probe_centred_seed0.json
-	$(PY) benchmarks/distill_goal_probe.py --policies runs/multitask/distill-centred-seed2 \
-		--out results/multitask/goal_probe_centred_seed2.json
+	$(PY) probes/distill_goal_probe.py --policies runs/multitask/distill --out results/side/multitask/goal_probe_centred_seed0.json
+	$(PY) probes/distill_goal_probe.py --policies runs/multitask/distill-centred-seed2 \
+		--out results/side/multitask/goal_probe_centred_seed2.json
 	# Table 2 in choice scenes: the stacking tasks' scenes get a third block beside the moved one
 	# (the base must be found by colour); their policies train 100k more steps there from the ones above
 	$(VENV)/bin/zsrm multitask-policies --config v1 --choice --steps 100000 --root runs/multitask/policies-choice \
 		--out results/multitask/choice/policies.json
-	OMP_NUM_THREADS=1 $(PY) benchmarks/task_policy_distractor.py --choice-policies results/multitask/choice/task_policies \
-		--out results/multitask/choice/task_policy_distractor.json
+	OMP_NUM_THREADS=1 $(PY) probes/task_policy_distractor.py --choice-policies results/multitask/choice/task_policies \
+		--out results/side/multitask/choice/task_policy_distractor.json
 	$(VENV)/bin/zsrm multitask-rollouts --choice-policies results/multitask/choice/task_policies --episodes 50 \
 		--out data/multitask/rollouts-choice
 	$(VENV)/bin/zsrm distill --schedule cpu --policies language primitive none --no-centre-text --threads 1 \

@@ -6,9 +6,9 @@ its standard error across seeds (the spread a user rerunning ``zsrm distill`` wo
 per seed the test-task gaps language - primitive and primitive - none with the two standard
 errors added (the issue's bar).
 
-    python benchmarks/table2_seeds.py results/multitask/table2_seed0.json results/multitask/table2_seed1.json \\
+    python benchmarks/table2_seeds.py results/side/multitask/table2_seed0.json results/multitask/table2_seed1.json \\
         results/multitask/table2_seed2.json results/multitask/table2_seed3.json \\
-        --out results/multitask/table2_seeds.json
+        --out results/side/multitask/table2_seeds.json
 
 ``--language T1 T2 ...`` (one table per table above, each from the same rollouts and distillation
 seed) puts each table's language row in place of the table's own: a language policy distilled
@@ -21,7 +21,7 @@ import argparse
 
 from zsrm.evaluation.multitask import POLICY_NAMES, SPLITS, SPREADS
 from zsrm.rl.evaluate import mean_se
-from zsrm.vlm.files import read_json, write_json
+from zsrm.common.files import read_json, write_json
 
 GAPS = (("language", "primitive"), ("primitive", "none"))
 
@@ -31,7 +31,7 @@ def main() -> None:
     parser.add_argument("tables", nargs="+", help="table2.json files, one per distillation seed")
     parser.add_argument("--language", nargs="+", metavar="TABLE",
                         help="tables whose language rows stand in for the tables' own, one per table")
-    parser.add_argument("--out", default="results/multitask/table2_seeds.json")
+    parser.add_argument("--out", default="results/side/multitask/table2_seeds.json")
     args = parser.parse_args()
 
     tables = [read_json(path, "a table of zsrm eval-multitask") for path in args.tables]

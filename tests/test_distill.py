@@ -24,7 +24,7 @@ from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
 from zsrm.tasks.language import parse_goal
 from zsrm.testing import hostile as H
 from zsrm.vlm import load_vlm
-from zsrm.vlm.files import ZsrmFileError
+from zsrm.common.files import ZsrmFileError
 from zsrm.vlm.scene import SceneConfig
 
 TINY = dict(steps=256, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, eval_every=128,
@@ -43,14 +43,19 @@ def blue_pixels(frames: np.ndarray) -> np.ndarray:
     return (b > 100) & (b - r > 60) & (b - g > 40)
 
 
-def run_benchmark(name: str, monkeypatch, *args: str) -> None:
-    """Run benchmarks/NAME as python would, with ARGS."""
+def run_benchmark(name: str, monkeypatch, *args: str, folder: str = "benchmarks") -> None:
+    """Run FOLDER/NAME (benchmarks/ or probes/) as python would, with ARGS."""
     import runpy
     import sys
 
-    script = Path(__file__).parent.parent / "benchmarks" / name
+    script = Path(__file__).parent.parent / folder / name
     monkeypatch.setattr(sys, "argv", [str(script), *args])
     runpy.run_path(str(script), run_name="__main__")
+
+
+def run_probe(name: str, monkeypatch, *args: str) -> None:
+    """Run probes/NAME as python would, with ARGS."""
+    run_benchmark(name, monkeypatch, *args, folder="probes")
 
 
 @pytest.fixture(scope="module")
@@ -524,9 +529,9 @@ def test_a_damaged_distilled_policy_is_one_line_naming_the_file(pipeline, damage
     assert not marker.exists()
 
 
-def test_blue_sensitivity_benchmark_measures_each_moved_block(pipeline, tmp_path, monkeypatch):
+def test_blue_sensitivity_probe_measures_each_moved_block(pipeline, tmp_path, monkeypatch):
     out = tmp_path / "blue.json"
-    run_benchmark("distill_blue_sensitivity.py", monkeypatch, "--policies", str(pipeline / "distill"), "--scenes", "1",
+    run_probe("distill_blue_sensitivity.py", monkeypatch, "--policies", str(pipeline / "distill"), "--scenes", "1",
                   "--out", str(out))
     result = json.loads(out.read_text())
     for policy in ("language", "primitive", "none"):
@@ -538,7 +543,7 @@ def test_blue_sensitivity_benchmark_measures_each_moved_block(pipeline, tmp_path
 
 def test_goal_probe_reads_swapped_and_other_relation_sentences(pipeline, tmp_path, monkeypatch):
     out = tmp_path / "probe.json"
-    run_benchmark("distill_goal_probe.py", monkeypatch, "--policies", str(pipeline / "distill"), "--seeds", "1",
+    run_probe("distill_goal_probe.py", monkeypatch, "--policies", str(pipeline / "distill"), "--seeds", "1",
                   "--tasks", "1", "--out", str(out))
     result = json.loads(out.read_text())
     assert set(result) >= {"language", "primitive"} and "none" not in result
@@ -554,13 +559,13 @@ def test_goal_probe_reads_swapped_and_other_relation_sentences(pipeline, tmp_pat
         assert test[reading]["episodes"] == 1 and 0 <= test[reading]["mean"] <= 100
 
 
-def test_task_policy_distractor_benchmark_adds_the_third_colour(pipeline, tmp_path, monkeypatch):
+def test_task_policy_distractor_probe_adds_the_third_colour(pipeline, tmp_path, monkeypatch):
     venv = make_vec(TrainConfig(goal=GOALS[0]), 1, 0, distractors=("yellow",))
     venv.reset()
     assert set(venv.envs[0].unwrapped.object_positions()) == {"red", "green", "yellow"}
     venv.close()
     out = tmp_path / "distractor.json"
-    run_benchmark("task_policy_distractor.py", monkeypatch, "--policies", str(pipeline / "policies"), "--tasks", "1",
+    run_probe("task_policy_distractor.py", monkeypatch, "--policies", str(pipeline / "policies"), "--tasks", "1",
                   "--episodes", "1", "--out", str(out))
     result = json.loads(out.read_text())
     row = result["per_task"][GOALS[0]]  # "a red block on top of a green block"

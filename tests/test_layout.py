@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "zsrm"
 
 # Bottom to top. A package may import from the packages before it, never from those after it.
-LAYERS = ["tasks", "envs", "vlm", "data", "grounding", "fullmodel", "rewards", "rl", "policy", "evaluation",
+LAYERS = ["common", "tasks", "envs", "vlm", "data", "grounding", "fullmodel", "rewards", "rl", "policy", "evaluation",
           "pipeline", "testing", "cli"]
 CLI = "cli"
 # Pairs the order allows but the design does not: (package, package it must not import, why).
@@ -41,7 +41,9 @@ def _layer_of(path: Path) -> str | None:
 
 
 def _dotted(path: Path) -> list[str]:
-    """The module's dotted name, as a list (a package's __init__ is the package)."""
+    """The module's dotted name, as a list (a package's __init__ is the package); a script's, its name."""
+    if PACKAGE not in path.parents:
+        return [path.stem]
     parts = ["zsrm", *path.relative_to(PACKAGE).with_suffix("").parts]
     return parts[:-1] if parts[-1] == "__init__" else parts
 
@@ -51,6 +53,9 @@ def _imported_modules(path: Path) -> list[tuple[int, str]]:
     tree = ast.parse(path.read_text(), filename=str(path))
     here = _dotted(path)
     package = here if path.name == "__init__.py" else here[:-1]
+    # a package named for its data files (importlib.resources.files("zsrm.envs")) is not imported
+    data = {id(node.args[0]) for node in ast.walk(tree) if isinstance(node, ast.Call) and node.args
+            and getattr(node.func, "attr", getattr(node.func, "id", None)) == "files"}
     out = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
@@ -63,7 +68,8 @@ def _imported_modules(path: Path) -> list[tuple[int, str]]:
                 name = node.module or ""
             out.append((node.lineno, name))
             out += [(node.lineno, f"{name}.{alias.name}") for alias in node.names]
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and _MODULE_STRING.match(node.value):
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and _MODULE_STRING.match(node.value) \
+                and id(node) not in data:
             out.append((node.lineno, node.value))  # lazy imports by name (importlib)
     return [(line, name) for line, name in out if name == "zsrm" or name.startswith("zsrm.")]
 
@@ -83,6 +89,57 @@ def _imports() -> list[tuple[Path, int, str, str]]:
 
 def _where(path: Path, line: int) -> str:
     return f"{path.relative_to(ROOT)}:{line}"
+
+
+def _module_file(name: str) -> Path | None:
+    """The source file of the longest zsrm module a dotted name starts with (``zsrm.rl.envs.make_vec``
+    -> zsrm/rl/envs.py; a package is its __init__.py)."""
+    parts = name.split(".")
+    for n in range(len(parts), 1, -1):
+        base = ROOT.joinpath(*parts[:n])
+        for path in (base.with_suffix(".py"), base / "__init__.py"):
+            if path.is_file() and PACKAGE in path.parents:
+                return path
+    return None
+
+
+def _file_graph() -> dict[Path, set[Path]]:
+    """file -> the zsrm files it imports (lazy imports inside functions included)."""
+    graph: dict[Path, set[Path]] = defaultdict(set)
+    for path in _modules():
+        for _, name in _imported_modules(path):
+            target = _module_file(name)
+            if target is not None and target != path:
+                graph[path].add(target)
+    return graph
+
+
+def _circles(graph: dict[Path, set[Path]]) -> list[list[Path]]:
+    """One shortest circle through each file that lies on one (breadth-first from the file)."""
+    out, seen = [], set()
+    for start in sorted(graph):
+        if start in seen:
+            continue
+        parents, frontier = {start: None}, [start]
+        while frontier and start not in seen:
+            nxt = []
+            for node in frontier:
+                for dst in sorted(graph.get(node, ())):
+                    if dst == start:
+                        circle = [node]
+                        while parents[circle[-1]] is not None:
+                            circle.append(parents[circle[-1]])
+                        circle = circle[::-1]
+                        out.append(circle)
+                        seen.update(circle)
+                        break
+                    if dst not in parents:
+                        parents[dst] = node
+                        nxt.append(dst)
+                if start in seen:
+                    break
+            frontier = nxt
+    return out
 
 
 def test_every_package_is_a_layer():
@@ -121,6 +178,66 @@ def test_no_import_circle_between_packages():
     assert not circles, f"packages on an import circle: {circles}"
 
 
+def test_no_import_circle_between_files():
+    circles = _circles(_file_graph())
+    text = [" -> ".join(str(p.relative_to(ROOT)) for p in [*c, c[0]]) for c in circles]
+    assert not circles, "files on an import circle:\n" + "\n".join(text)
+
+
+def test_the_circle_finder_finds_a_circle(tmp_path):
+    a, b, c = tmp_path / "a.py", tmp_path / "b.py", tmp_path / "c.py"
+    assert _circles({a: {b}, b: {c}, c: {a}}) == [[a, b, c]]
+    assert _circles({a: {b}, b: {c}}) == []
+
+
+# The shared helpers live in zsrm.common; zsrm.vlm is about vision-language models only.
+SHARED_MODULES = {"files", "registry", "optim", "checkpoints"}
+# Files owned by issue 37 (training speed) that still import zsrm.vlm.files, an alias kept for them;
+# remove each entry when its import line moves to zsrm.common.files.
+PENDING_SHARED_IMPORTS = {"benchmarks/ppo_speed.py", "benchmarks/train_profile.py"}
+
+
+def _shared_names() -> set[str]:
+    """Top-level functions, classes and constants of the zsrm.common modules."""
+    names = set()
+    for path in (PACKAGE / "common").glob("*.py"):
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                names.add(node.name)
+            elif isinstance(node, ast.Assign):
+                names.update(t.id for t in node.targets if isinstance(t, ast.Name))
+    return names
+
+
+def _shared_from_vlm() -> dict[str, list[str]]:
+    """file -> imports of the shared helpers through zsrm.vlm, in every Python file outside zsrm/vlm/."""
+    shared, out = SHARED_MODULES | _shared_names(), defaultdict(list)
+    for path in sorted(ROOT.glob("*/**/*.py")):
+        rel = path.relative_to(ROOT)
+        if rel.parts[0].startswith(".") or rel.parts[0] in ("runs", "build") or "zsrm.egg-info" in rel.parts \
+                or (PACKAGE / "vlm") in path.parents or "__pycache__" in rel.parts:
+            continue
+        for line, name in _imported_modules(path):
+            parts = name.split(".")
+            if parts[:2] == ["zsrm", "vlm"] and shared & set(parts[2:]):
+                out[str(rel)].append(f"{rel}:{line}: {name}")
+    return out
+
+
+def test_shared_helpers_are_not_imported_from_the_vlm_package():
+    found = _shared_from_vlm()
+    bad = [hit for file, hits in found.items() if file not in PENDING_SHARED_IMPORTS for hit in hits]
+    assert not bad, "import these from zsrm.common, not zsrm.vlm:\n" + "\n".join(bad)
+    stale = sorted(PENDING_SHARED_IMPORTS - set(found))
+    assert not stale, f"no longer import from zsrm.vlm, drop them from PENDING_SHARED_IMPORTS: {stale}"
+
+
+def test_the_common_package_imports_nothing_else_of_zsrm():
+    bad = [f"{_where(path, line)}: {name}" for path in (PACKAGE / "common").glob("*.py")
+           for line, name in _imported_modules(path) if not name.startswith("zsrm.common")]
+    assert not bad, "\n".join(bad)
+
+
 def test_library_code_never_imports_the_cli():
     bad = [f"{_where(path, line)}: {src} imports zsrm.{CLI}" for path, line, src, dst in _imports()
            if dst == CLI and src != CLI]
@@ -129,7 +246,7 @@ def test_library_code_never_imports_the_cli():
 
 def _readme_layout_packages() -> list[str]:
     text = (ROOT / "README.md").read_text()
-    section = text.split("## Pipeline and layout", 1)[1].split("\n## ", 1)[0]
+    section = text.split("## Layout", 1)[1].split("\n## ", 1)[0]
     rows = [line for line in section.splitlines() if line.startswith("|") and "`zsrm." in line]
     return [re.search(r"`zsrm\.(\w+)`", row.split("|")[2]).group(1) for row in rows]
 

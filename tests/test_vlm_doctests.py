@@ -4,8 +4,7 @@ import importlib
 
 import pytest
 
-MODULES = ["zsrm.vlm.base", "zsrm.vlm.files", "zsrm.vlm.losses", "zsrm.vlm.presence", "zsrm.vlm.scene", "zsrm.vlm.registry",
-           "zsrm.vlm.text_cache"]
+MODULES = ["zsrm.vlm.base", "zsrm.vlm.losses", "zsrm.vlm.presence", "zsrm.vlm.scene", "zsrm.vlm.text_cache"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -6,7 +6,7 @@ import pytest
 
 from zsrm.cli import main
 from zsrm.vlm import SHIPPED_SCENE_DIR, SceneVLM, create_scene_vlm, load_vlm
-from zsrm.vlm.registry import SHIPPED
+from zsrm.common.registry import SHIPPED
 
 
 def test_shipped_scene_model_missing_says_how_to_build_it(tmp_path, monkeypatch, capsys):

@@ -12,7 +12,7 @@ import numpy as np
 
 from zsrm.data.shards import MANIFEST, load_npz, read_manifest
 from zsrm.tasks.lexicon import BOX
-from zsrm.vlm.files import ZsrmFileError, read_json
+from zsrm.common.files import ZsrmFileError, read_json
 
 LABELS = "labels"  # the default labels folder inside a dataset folder
 ORACLE = "oracle"  # inside the labels folder: true-coordinate captions, for evaluation only

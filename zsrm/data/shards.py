@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from zsrm.vlm.files import ZsrmFileError, atomic_path, check_writable, json_type, read_json, write_json
+from zsrm.common.files import ZsrmFileError, atomic_path, check_writable, json_type, read_json, write_json
 
 FORMAT = "zsrm-shards-1"
 MANIFEST = "manifest.json"

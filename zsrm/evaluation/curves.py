@@ -135,7 +135,7 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def write_csv(rows: list[dict], path: str | Path) -> Path:
-    from zsrm.vlm.files import atomic_path
+    from zsrm.common.files import atomic_path
 
     path = Path(path)
     with atomic_path(path) as tmp, tmp.open("w", newline="") as f:

@@ -31,7 +31,7 @@ from zsrm.grounding.labeler import RelationTable, pixel_thresholds, relation_tup
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import RELATIONS
-from zsrm.vlm.files import write_json, write_text
+from zsrm.common.files import write_json, write_text
 
 MIN_SUPPORT = 20  # fewer true positives than this: the F1 is reported but flagged as noisy
 

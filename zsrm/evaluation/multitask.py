@@ -22,12 +22,13 @@ from zsrm.envs.rollout import run_vec_episodes
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.policy.models import DistilledPolicy, embed_goals
 from zsrm.rl.config import STACKING, TrainConfig, goal_relation
-from zsrm.rl.envs import goal_camera, make_vec
+from zsrm.rl.envs import make_vec
+from zsrm.rl.goals import goal_camera
 from zsrm.rl.evaluate import mean_se_cell
 from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS, choice_colours
 from zsrm.tasks.language import parse_goal
 from zsrm.tasks.relations import holds_in_world
-from zsrm.vlm.files import write_json, write_text
+from zsrm.common.files import write_json, write_text
 
 EVAL_SEED = 3_000_000  # evaluation scenes: seeds apart from the training and collection envs'
 POLICY_NAMES = {"none": "No Conditioning", "primitive": "Primitive Code Cond.", "language": "Language Cond.",
@@ -121,7 +122,7 @@ def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[st
     unfinished cell, and policies distilled at different times are scored as they come."""
     from tqdm import tqdm
 
-    from zsrm.vlm.files import ZsrmFileError, read_json
+    from zsrm.common.files import ZsrmFileError, read_json
 
     out: dict = {}
     keys = {name: weights_key(policy) for name, policy in policies.items()}

@@ -16,7 +16,7 @@ def pyplot():
 
 def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     """Lay out ``fig``, write it to ``path`` atomically (parent folders made) and close it."""
-    from zsrm.vlm.files import atomic_path
+    from zsrm.common.files import atomic_path
 
     try:
         fig.tight_layout()

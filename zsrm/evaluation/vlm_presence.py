@@ -22,7 +22,7 @@ from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import CAMERAS
 from zsrm.vlm.base import VisionLanguageModel
-from zsrm.vlm.files import write_json
+from zsrm.common.files import write_json
 from zsrm.vlm.presence import min_visible_pixels, presence_scores
 
 

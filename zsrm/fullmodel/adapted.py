@@ -35,7 +35,7 @@ from torch import nn
 
 from zsrm.fullmodel.text import RoleTextFeatures, load_frozen_reference, portable_spec, stored_spec
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel
-from zsrm.vlm.registry import build_model, load_folder, load_weights, read_config, register_kind, save_folder
+from zsrm.common.registry import build_model, load_folder, load_weights, read_config, register_kind, save_folder
 from zsrm.vlm.text_cache import TextEmbeddingCache
 
 BACKEND = "zsrm-adapted"

@@ -26,7 +26,7 @@ from torch import nn
 
 from zsrm.fullmodel.text import RoleTextFeatures, load_frozen_reference, portable_spec, stored_spec
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel, check_image_tower, pixels_from_images
-from zsrm.vlm.registry import (WEIGHTS_FILE, build_model, folder_kind, load_weights, read_config, register_kind,
+from zsrm.common.registry import (WEIGHTS_FILE, build_model, folder_kind, load_weights, read_config, register_kind,
                                register_shipped, save_folder)
 from zsrm.vlm.text_cache import TextEmbeddingCache
 

@@ -38,10 +38,10 @@ from zsrm.fullmodel.student import StudentConfig, StudentRewardNet
 from zsrm.tasks.negatives import candidate_texts
 from zsrm.vlm.base import VisionLanguageModel
 from zsrm.vlm.factory import DEFAULT_VLM, load_vlm
-from zsrm.vlm.files import atomic_path, write_json
+from zsrm.common.files import atomic_path, write_json
 from zsrm.vlm.losses import multi_positive_contrastive_loss
-from zsrm.vlm.optim import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
-from zsrm.vlm.registry import load_weights, save_weights
+from zsrm.common.checkpoints import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
+from zsrm.common.registry import load_weights, save_weights
 
 CHECKPOINT_WEIGHTS = "weights.safetensors"
 STUDENT_PRESETS = {

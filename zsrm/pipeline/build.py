@@ -20,7 +20,7 @@ from zsrm.grounding.annotate import LabelConfig
 from zsrm.pipeline import narrow
 from zsrm.tasks.relations import WORLD_THRESHOLDS
 from zsrm.vlm.factory import DEFAULT_VLM
-from zsrm.vlm.files import check_writable
+from zsrm.common.files import check_writable
 from zsrm.vlm.pretrain import PretrainConfig, check_config
 
 
@@ -129,7 +129,7 @@ class RewardData:
     0.90 at 10 cm, 0.82 at 12 cm; blocks' on top of: 0.62 at 9 cm, 0.61 at 12 cm). A quarter
     of the tabletop episodes start with a block held in the air above another (``--p-hold``):
     without them a stack policy trained on the student learned to hover a block 11 cm above
-    the other, which the student called "on top of" (benchmarks/reward_hacking.py). Both
+    the other, which the student called "on top of" (probes/reward_hacking.py). Both
     stages resume after a kill.
     """
 

@@ -17,7 +17,7 @@ from zsrm.envs.rollout import camera_strip, episode_steps, make_env, random_poli
 from zsrm.envs.scripted import scripted_controller
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.tasks.catalogue import REPORT_TASKS
-from zsrm.vlm.files import atomic_path, check_writable, write_json, write_text
+from zsrm.common.files import atomic_path, check_writable, write_json, write_text
 from zsrm.vlm.factory import DEFAULT_VLM
 
 SCENES = {"tabletop": "stack", "pushing": "push_close", "pendulum": "pendulum"}

@@ -18,7 +18,7 @@ from zsrm.pipeline.learn import Sweep
 from zsrm.policy.training import DistillConfig
 from zsrm.rl.config import STACKING, goal_relation
 from zsrm.tasks.catalogue import TRAIN_TASKS
-from zsrm.vlm.files import check_writable
+from zsrm.common.files import check_writable
 
 POLICIES_ROOT = "runs/multitask/policies"
 POLICIES_SUMMARY = "results/multitask/policies.json"

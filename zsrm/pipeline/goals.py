@@ -63,7 +63,7 @@ class EvalGoals:
     def run(self) -> int:
         from zsrm.evaluation.goal_parsing import score_goals
         from zsrm.pipeline.measure import write_json
-        from zsrm.vlm.files import check_writable
+        from zsrm.common.files import check_writable
 
         if self.out:
             check_writable(self.out)

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Literal
 
 from zsrm.rl.config import PRESETS, REWARDS, TrainConfig
-from zsrm.vlm.files import check_writable, write_json
+from zsrm.common.files import check_writable, write_json
 
 SWEEP_TASKS = ("stack", "place_right", "push_close")
 
@@ -173,7 +173,7 @@ class Plot:
 
     def run(self) -> int:
         from zsrm.evaluation.learning_curves import PENDULUM, plot_figure4, plot_learning_curves
-        from zsrm.vlm.files import read_json
+        from zsrm.common.files import read_json
 
         check_writable(self.figure4 or self.figure6)  # before any work
         summary = {task: rewards for task, rewards in read_json(self.summary).items() if task != "meta"}

@@ -17,7 +17,7 @@ from typing import Literal
 from zsrm.data.dataset import LABELS
 from zsrm.evaluation.curves import FIGURE5_GOAL
 from zsrm.tasks.catalogue import REPORT_TASKS, SPATIAL_TASKS
-from zsrm.vlm import files
+from zsrm.common import files
 from zsrm.vlm.factory import DEFAULT_VLM
 
 
@@ -310,7 +310,7 @@ class EvalReward:
         """(name -> spec, name -> ZSRMReward, the base VLM)."""
         from zsrm.fullmodel import load_reward_backbone
         from zsrm.rewards.binarised import ZSRMReward
-        from zsrm.vlm.registry import SHIPPED
+        from zsrm.common.registry import SHIPPED
 
         names = {"zsrm": self.zsrm}
         for item in self.compare:
@@ -328,7 +328,7 @@ class EvalReward:
         return names, models, base_vlm
 
     def _meta(self, names: dict, frames: dict) -> dict:
-        from zsrm.vlm.registry import SHIPPED
+        from zsrm.common.registry import SHIPPED
 
         return {
             "command": "zsrm " + " ".join(sys.argv[1:]),

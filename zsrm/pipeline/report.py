@@ -15,7 +15,7 @@ import shutil
 import time
 from pathlib import Path
 
-from zsrm.vlm.files import write_json, write_text
+from zsrm.common.files import write_json, write_text
 
 RESULTS = Path("results")
 
@@ -91,10 +91,10 @@ window.addEventListener("load", function () {
 </script>"""
 
 
-def write_report(folder: Path, scale: str, vlm: str, log: list[dict], workdir: Path, wall_s: float) -> Path:
-    """Write the report of a ``zsrm reproduce`` run; at the demo scale also ``results/demo.json``."""
-    from zsrm.pipeline.reproduce import SCALES, demo_result, is_demo
-
+def write_report(folder: Path, scale: str, vlm: str, log: list[dict], workdir: Path, wall_s: float,
+                 demo_task: str | None = None) -> Path:
+    """Write the report of a ``zsrm reproduce`` run; for a demo-kind scale (``demo_task``, the task it
+    trains) also ``results/demo.json``."""
     folder.mkdir(parents=True, exist_ok=True)
     report = Report(folder)
     report.text(f"zsrm reproduce --scale {scale}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, on "
@@ -104,14 +104,26 @@ def write_report(folder: Path, scale: str, vlm: str, log: list[dict], workdir: P
     report.table(["stage", "what", "seconds", "cached", "command"],
                  [[e["stage"], e["what"], f"{e['seconds']:.0f}", "yes" if e.get("cached") else "no", e["command"]]
                   for e in log])
-    if is_demo(scale):
-        result = demo_result(log, wall_s, SCALES[scale]["task"])
+    if demo_task is not None:
+        result = demo_result(log, wall_s, demo_task)
         write_json(RESULTS / "demo.json" if scale == "demo" else folder / "demo.json", result)
         demo_section(report, result, workdir)
     else:
         run_section(report, workdir)
     committed_results(report)
     return report.write(f"zsrm report ({scale} scale)")
+
+
+def demo_result(log: list[dict], wall_s: float, task: str) -> dict:
+    """``results/demo.json``: the demo's learning signal (zsrm-trained policy against random)."""
+    by_stage = {entry["stage"]: entry["result"] for entry in log}
+    trained, rand = by_stage["policy_zsrm"], by_stage["policy_random"]
+    return {"wall_s": round(wall_s, 1), "task": task,
+            "zsrm_policy_mean": trained["final_mean"], "zsrm_policy_se": trained["final_se"],
+            "random_policy_mean": rand["final_mean"], "random_policy_se": rand["final_se"],
+            "zsrm_policy_env_steps": trained["env_steps"], "episodes": trained["final_episodes"],
+            "stage_seconds": {e["stage"]: e["seconds"] for e in log},
+            "stages_cached": [e["stage"] for e in log if e.get("cached")]}
 
 
 def demo_section(report: Report, result: dict, workdir: Path):

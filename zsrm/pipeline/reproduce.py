@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Literal
 
-from zsrm.vlm.files import check_writable, read_json, write_json
+from zsrm.common.files import check_writable, read_json, write_json
 
 SCALES: dict[str, dict] = {
     # place_right: a random policy almost never succeeds there (0.1 of 100), so learning shows;
@@ -258,19 +258,7 @@ class Reproduce:
         stages = demo_stages(scale, self.vlm) if is_demo(self.scale) else cpu_stages(scale, self.vlm, self.address)
         log = run_stages(stages, workdir)
         wall = time.time() - start
-        index = write_report(Path(self.report), self.scale, self.vlm, log, workdir, wall)
+        demo_task = SCALES[self.scale]["task"] if is_demo(self.scale) else None
+        index = write_report(Path(self.report), self.scale, self.vlm, log, workdir, wall, demo_task)
         print(f"report: {index.resolve()}")
         return 0
-
-
-def demo_result(log: list[dict], wall_s: float, task: str) -> dict:
-    """``results/demo.json``: the demo's learning signal (zsrm-trained policy against random)."""
-    by_stage = {entry["stage"]: entry["result"] for entry in log}
-    trained, rand = by_stage["policy_zsrm"], by_stage["policy_random"]
-    return {"wall_s": round(wall_s, 1), "task": task,
-            "zsrm_policy_mean": trained["final_mean"], "zsrm_policy_se": trained["final_se"],
-            "random_policy_mean": rand["final_mean"], "random_policy_se": rand["final_se"],
-            "zsrm_policy_env_steps": trained["env_steps"], "episodes": trained["final_episodes"],
-            "stage_seconds": {e["stage"]: e["seconds"] for e in log},
-            "stages_cached": [e["stage"] for e in log if e.get("cached")]}
-

@@ -56,7 +56,7 @@ def keep_task_policies(root: str | Path, keep: str | Path, trials) -> list[Path]
     import shutil
 
     from zsrm.rl.sweep import is_finished
-    from zsrm.vlm.files import atomic_path
+    from zsrm.common.files import atomic_path
 
     kept = []
     for trial in trials:
@@ -130,7 +130,8 @@ def collect_task(policy: str | Path, goal: str, episodes: int, envs: int) -> tup
     the shard's manifest entry (the oracle episode rewards, the camera, the action repeat)."""
     import torch
 
-    from zsrm.rl.envs import goal_camera, make_vec
+    from zsrm.rl.envs import make_vec
+    from zsrm.rl.goals import goal_camera
     from zsrm.rl.features import policy_view
     from zsrm.rl.policy import PolicyBundle
     from zsrm.vlm import load_vlm

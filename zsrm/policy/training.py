@@ -23,13 +23,13 @@ import torch.nn.functional as F
 from zsrm.policy.models import (CONDITIONINGS, IMAGE_VIEWS, KEYPOINT_VIEWS, DistilledPolicy, PolicyConfig,
                                 embed_goals, load_policy, save_policy)
 from zsrm.policy.rollouts import RolloutData
-from zsrm.vlm.files import read_json, write_json
-from zsrm.vlm.optim import load_optimizer, read_checkpoint_state, save_checkpoint
-from zsrm.vlm.registry import load_weights
+from zsrm.common.files import read_json, write_json
+from zsrm.common.checkpoints import load_optimizer, read_checkpoint_state, save_checkpoint
+from zsrm.common.registry import load_weights
 
 # cpu reads grey frames: the scene VLM's trunk, pretrained on which colours are present, gives features
 # so colour-bound that, read in colour, none of the paper's three follows a colour it never saw
-# (results/multitask/table2_view_colour.json); the paper reads colour through ImageNet's ResNet18.
+# (results/side/multitask/table2_view_colour.json); the paper reads colour through ImageNet's ResNet18.
 SCHEDULES = {"cpu": {"tower": "scene", "epochs": 10, "image_view": "grey", "centre_text": True},
              "paper": {"tower": "resnet18", "epochs": 300, "image_view": "colour", "centre_text": False}}
 
@@ -52,7 +52,7 @@ class DistillConfig:
     """goal embedding: the language encoder's own (as the paper feeds CLIP's) or the image-text space's"""
     keypoint_view: Literal["colour", "grey", "shape", "none"] = "none"
     """what the grounded policy's own keypoints look at: the frames, grey frames, grey frames with every
-    coloured object one grey (through a trunk copy that trains), or nothing (results/multitask/table2_grounded*)"""
+    coloured object one grey (through a trunk copy that trains), or nothing (results/side/multitask/table2_grounded*)"""
     centre_text: bool | None = None
     """language policy: centre and scale the goal embeddings by the training goals' (their sentence
     embeddings differ by a few hundredths per dimension, one-hot codes by 1); default: the schedule's

@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from zsrm.rewards.interface import RewardModel, check_images
-from zsrm.vlm.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
+from zsrm.common.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
 
 KIND = "zsrm-vice"
 

@@ -11,28 +11,10 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 import zsrm.envs  # noqa: F401  (registers the scenes)
 from zsrm.rl.config import TrainConfig
-from zsrm.tasks.catalogue import PENDULUM_ID, TABLETOP_ID, CatalogueEntry, choice_colour, resolve
-from zsrm.tasks.relations import RELATIONS
+from zsrm.rl.goals import goal_camera, is_pendulum, task_entry
+from zsrm.tasks.catalogue import PENDULUM_ID, TABLETOP_ID, choice_colour
 
 EPISODE_STEPS = 100
-
-
-def task_entry(goal: str) -> CatalogueEntry:
-    """The catalogue entry of a goal: a spatial task, or the pendulum."""
-    return resolve(goal)
-
-
-def is_pendulum(goal: str) -> bool:
-    return task_entry(goal).env_id == PENDULUM_ID
-
-
-def goal_camera(goal: str) -> str:
-    """The camera the goal's relation is read on (Table 1): front, left or tilted; the
-    pendulum's one camera, front."""
-    entry = task_entry(goal)
-    if entry.env_id == PENDULUM_ID:
-        return "front"
-    return RELATIONS[entry.task.relation].camera
 
 
 def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",

@@ -11,7 +11,7 @@ The VLM was pretrained to tell which coloured objects are present; it hardly see
 (a probe on its map reads the fingers' open/closed state no better than chance). So a small
 CNN on the raw image, trained by RL, adds its own keypoints (``pixels=True``): with it the
 probe's error on the grip state falls from 0.45 to 0.11 and on the gripper's position from
-2.3 to 0.7 cm (``python benchmarks/policy_vision_probe.py``).
+2.3 to 0.7 cm (``python probes/policy_vision_probe.py``).
 """
 from __future__ import annotations
 
@@ -101,7 +101,7 @@ def check_view(size: int, camera_size: int) -> int:
 def policy_view(venv: VecEnv, vlm, cfg) -> VecImageFeatures:
     """What a policy trained with TrainConfig ``cfg`` sees of ``venv``: its goal camera through
     the frozen VLM trunk and the pixel CNN, at the sizes ``cfg`` names."""
-    from zsrm.rl.envs import goal_camera
+    from zsrm.rl.goals import goal_camera
 
     return VecImageFeatures(venv, vlm, goal_camera(cfg.goal), cfg.trunk_size, cfg.pixel_size)
 

@@ -16,10 +16,10 @@ from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor
-from zsrm.vlm.optim import check_optimizer, load_optimizer, read_checkpoint_state
-from zsrm.vlm.optim import save_checkpoint as save_checkpoint_folder
-from zsrm.vlm.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
-from zsrm.vlm.registry import save_weights as save_module_weights
+from zsrm.common.checkpoints import check_optimizer, load_optimizer, read_checkpoint_state
+from zsrm.common.checkpoints import save_checkpoint as save_checkpoint_folder
+from zsrm.common.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
+from zsrm.common.registry import save_weights as save_module_weights
 
 KIND = "zsrm-policy"
 
@@ -64,7 +64,7 @@ class PolicyBundle:
             return MultiInputActorCriticPolicy(obs_space, act_space, lambda _: 0.0, **policy_kwargs(cfg))
 
         policy = build_model(folder, make)
-        load_weights(policy, folder)  # checks the weights file first (zsrm.vlm.registry.check_weights)
+        load_weights(policy, folder)  # checks the weights file first (zsrm.common.registry.check_weights)
         return cls(policy.eval(), cfg)
 
     @torch.no_grad()

@@ -28,7 +28,7 @@ import numpy as np
 
 from zsrm.rl.config import TrainConfig, takes_reward
 from zsrm.rl.evaluate import mean_se
-from zsrm.vlm.files import write_text
+from zsrm.common.files import write_text
 
 
 def trial_name(task: str, reward: str, seed: int) -> str:

@@ -14,7 +14,7 @@ from zsrm.envs.rollout import episode_steps, make_env, random_policy
 from zsrm.envs.scripted import scripted_controller
 from zsrm.rewards.vice import GoalClassifier, VICEReward, fit_goal_classifier
 from zsrm.rl.config import TrainConfig
-from zsrm.rl.envs import goal_camera, task_entry
+from zsrm.rl.goals import goal_camera, task_entry
 
 VICE_SEED = 500_000  # scripted and random rollouts for the classifier: seeds apart from training and evaluation
 

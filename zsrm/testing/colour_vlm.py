@@ -21,7 +21,7 @@ from torch import nn
 
 from zsrm.tasks.language import COLOURS
 from zsrm.vlm.base import VisionLanguageModel, pixels_from_images
-from zsrm.vlm.registry import save_folder
+from zsrm.common.registry import save_folder
 
 # Linear colour detectors on RGB in [0, 1] (rows: red, green, yellow, blue) and biases: each
 # is positive on its block colour and negative on the others, the table, floor and walls.

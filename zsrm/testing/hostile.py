@@ -226,9 +226,9 @@ def broken_copy(model: SavedModel, name: str) -> Path:
 
 @contextmanager
 def full_disk(after: int = 0):
-    """Atomic writes (:mod:`zsrm.vlm.files`) fail with ENOSPC from the ``after``-th on, as on a
+    """Atomic writes (:mod:`zsrm.common.files`) fail with ENOSPC from the ``after``-th on, as on a
     full disk: the temporary file is written, its rename never happens."""
-    from zsrm.vlm import files
+    from zsrm.common import files
 
     real, count = files._replace, [0]
 

@@ -4,7 +4,7 @@ Specs (open_clip style: factory functions, architectures as data):
 
 * ``"scene"``: the pretrained scene VLM shipped in ``zsrm/vlm/weights/scene/`` (built by
   ``zsrm pretrain-vlm``); likewise ``"student"``, the reward student shipped with
-  :mod:`zsrm.fullmodel` (see :mod:`zsrm.vlm.registry`); ``"student@DIGEST"`` that model only
+  :mod:`zsrm.fullmodel` (see :mod:`zsrm.common.registry`); ``"student@DIGEST"`` that model only
   if its weights are that version (what training runs record, see :func:`pinned`);
 * a folder saved by ``vlm.save(folder)``: its ``config.json`` names the model's kind;
 * ``"open_clip:MODEL"``: open_clip's default weights for MODEL (``open_clip:RN50`` is OpenAI's
@@ -23,7 +23,7 @@ from pathlib import Path
 import torch
 
 from zsrm.vlm.base import VisionLanguageModel
-from zsrm.vlm.registry import SHIPPED, WEIGHTS_FILE, load_folder
+from zsrm.common.registry import SHIPPED, WEIGHTS_FILE, load_folder
 
 DEFAULT_VLM = "scene"  # the VLM every stage uses unless told otherwise
 DEFAULT_OPEN_CLIP_MODEL = "RN50"

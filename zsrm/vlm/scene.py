@@ -28,7 +28,7 @@ import torch
 from torch import nn
 
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel, check_image_tower, pixels_from_images
-from zsrm.vlm.registry import (WEIGHTS_FILE, build_model, load_weights, read_config, register_kind, register_shipped,
+from zsrm.common.registry import (WEIGHTS_FILE, build_model, load_weights, read_config, register_kind, register_shipped,
                                save_folder)
 from zsrm.vlm.text_cache import TextEmbeddingCache
 

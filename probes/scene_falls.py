@@ -1,7 +1,7 @@
 """How often random actions end an episode with an object off the table, and the fastest an
 object moved (diagnostic for the scene fixes of issue 11; prints, writes nothing).
 
-    python benchmarks/scene_falls.py --task stack --episodes 200
+    python probes/scene_falls.py --task stack --episodes 200
 """
 import argparse
 

@@ -7,8 +7,8 @@ the stacking goals of Table 2 (same seeds and scenes as ``zsrm eval-multitask`` 
 choice-scene distillation), per policy and split: the control steps of 100 with the moved
 block on its base (the oracle episode reward) and on the third block.
 
-    OMP_NUM_THREADS=1 python benchmarks/choice_base_probe.py \\
-        --policies runs/multitask/distill-choice --out results/multitask/choice/base_probe.json
+    OMP_NUM_THREADS=1 python probes/choice_base_probe.py \\
+        --policies runs/multitask/distill-choice --out results/side/multitask/choice/base_probe.json
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from zsrm.envs.tabletop import TabletopEnv
 from zsrm.rl.evaluate import mean_se_cell
 from zsrm.tasks.language import parse_goal
 from zsrm.vlm import load_vlm
-from zsrm.vlm.files import write_json
+from zsrm.common.files import write_json
 
 
 def main() -> None:
@@ -32,7 +32,7 @@ def main() -> None:
     parser.add_argument("--spread", default="seen", choices=("seen", "unseen"))
     parser.add_argument("--seeds", type=int, default=50, help="seeded episodes per goal")
     parser.add_argument("--tasks", type=int, default=None, help="only the first N stacking goals per split")
-    parser.add_argument("--out", default="results/multitask/choice/base_probe.json")
+    parser.add_argument("--out", default="results/side/multitask/choice/base_probe.json")
     args = parser.parse_args()
 
     summary, policies = load_distilled(args.policies)

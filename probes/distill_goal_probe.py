@@ -15,8 +15,8 @@ The primitive policy reads each sentence's nearest training code, as in Table 2 
 goals, a swapped sentence is itself a training goal). Scored as ``zsrm eval-multitask``
 scores (same seeds, oracle episode reward of the real goal).
 
-    OMP_NUM_THREADS=1 python benchmarks/distill_goal_probe.py \\
-        --policies runs/multitask/distill --out results/multitask/goal_probe.json
+    OMP_NUM_THREADS=1 python probes/distill_goal_probe.py \\
+        --policies runs/multitask/distill --out results/side/multitask/goal_probe.json
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ from zsrm.policy.training import load_distilled
 from zsrm.rl.evaluate import mean_se_cell
 from zsrm.tasks.language import Task, parse_goal
 from zsrm.vlm import load_vlm
-from zsrm.vlm.files import write_json
+from zsrm.common.files import write_json
 
 PROBED = ("language", "primitive")
 
@@ -47,7 +47,7 @@ def main() -> None:
     parser.add_argument("--spread", default="seen", choices=("seen", "unseen"))
     parser.add_argument("--seeds", type=int, default=50, help="seeded episodes per goal and reading")
     parser.add_argument("--tasks", type=int, default=None, help="only the first N stacking goals per split")
-    parser.add_argument("--out", default="results/multitask/goal_probe.json")
+    parser.add_argument("--out", default="results/side/multitask/goal_probe.json")
     args = parser.parse_args()
 
     summary, policies = load_distilled(args.policies)

@@ -6,7 +6,7 @@ hold it: gripper x/z, the two blocks' x/z and the grip's open/closed state. Once
 frozen scene-VLM map alone, once with the small pixel CNN beside it. Mean absolute error on
 held-out frames (metres; 0-1 for the grip).
 
-    python benchmarks/policy_vision_probe.py --episodes 40
+    python probes/policy_vision_probe.py --episodes 40
 """
 import argparse
 

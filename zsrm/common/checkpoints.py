@@ -17,8 +17,8 @@ from typing import Callable
 import torch
 from torch import nn
 
-from zsrm.vlm.files import ZsrmFileError, output_error, read_json, write_json
-from zsrm.vlm.registry import load_tensors, parse_fields, save_tensors
+from zsrm.common.files import ZsrmFileError, output_error, read_json, write_json
+from zsrm.common.registry import load_tensors, parse_fields, save_tensors
 
 OPTIMIZER_TENSORS, OPTIMIZER_JSON = "optimizer.safetensors", "optimizer.json"
 

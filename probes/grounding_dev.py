@@ -2,13 +2,13 @@
 images collected with another seed than results/grounding.json's (seed 0), so that choices
 made on it are not tuned on the evaluation images. Prints, writes nothing but the data.
 
-    OMP_NUM_THREADS=1 python benchmarks/grounding_dev.py --out data/grounding_dev --seed 7
+    OMP_NUM_THREADS=1 python probes/grounding_dev.py --out data/grounding_dev --seed 7
 
 With ``--min-visible``, the silhouette refinement's one choice (zsrm.grounding.silhouette's
 MIN_VISIBLE: how much of a block must show for its own colour's region to be kept), chosen on
 data with the box (``--p-box``), labelled with ``--vlm`` and the box's ``--box-vlm``:
 
-    OMP_NUM_THREADS=1 python benchmarks/grounding_dev.py --out data/grounding_dev_box --p-box 0.3 \
+    OMP_NUM_THREADS=1 python probes/grounding_dev.py --out data/grounding_dev_box --p-box 0.3 \
         --vlm runs/vlm-box --box-vlm runs/vlm-box-full --locate fine --min-visible 0.5 0.65 0.8
 """
 import argparse

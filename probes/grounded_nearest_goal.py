@@ -8,8 +8,8 @@ itself. Two mappings: nearest in the language embedding (the primitive policy's 
 role and swaps blue for a training colour). Scored as ``zsrm eval-multitask`` scores (same
 seeds, oracle episode reward), with the goal's own embedding alongside for reference.
 
-    OMP_NUM_THREADS=1 python benchmarks/grounded_nearest_goal.py --spread seen \\
-        --out results/multitask/grounded_nearest_goal_seen.json
+    OMP_NUM_THREADS=1 python probes/grounded_nearest_goal.py --spread seen \\
+        --out results/side/multitask/grounded_nearest_goal_seen.json
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from zsrm.evaluation.multitask import EVAL_SEED, split_goals, task_rewards, task
 from zsrm.policy.models import embed_goals, load_policy
 from zsrm.rl.evaluate import mean_se_cell
 from zsrm.vlm import load_vlm
-from zsrm.vlm.files import write_json
+from zsrm.common.files import write_json
 
 MAPPINGS = ("language", "grounded")
 
@@ -32,7 +32,7 @@ def main() -> None:
     parser.add_argument("--policy", default="runs/multitask/distill/grounded", help="a grounded policy's folder")
     parser.add_argument("--spread", default="seen", choices=("seen", "unseen"))
     parser.add_argument("--seeds", type=int, default=50, help="seeded episodes per test goal")
-    parser.add_argument("--out", default="results/multitask/grounded_nearest_goal_seen.json")
+    parser.add_argument("--out", default="results/side/multitask/grounded_nearest_goal_seen.json")
     args = parser.parse_args()
 
     policy = load_policy(args.policy)

@@ -6,8 +6,8 @@ keypoints and its action move: on the test scenes when the blue block moves and 
 training-colour block moves, and on the training scenes for comparison. A policy blind to
 blue would barely respond when the blue block moves.
 
-    OMP_NUM_THREADS=1 python benchmarks/distill_blue_sensitivity.py \
-        --out results/multitask/blue_sensitivity.json
+    OMP_NUM_THREADS=1 python probes/distill_blue_sensitivity.py \
+        --out results/side/multitask/blue_sensitivity.json
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from zsrm.rl.envs import make_vec
 from zsrm.rl.evaluate import mean_se
 from zsrm.tasks.language import parse_goal
 from zsrm.vlm import load_vlm
-from zsrm.vlm.files import write_json
+from zsrm.common.files import write_json
 
 
 @torch.no_grad()
@@ -54,7 +54,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--policies", default="runs/multitask/distill", help="the folder zsrm distill wrote")
     parser.add_argument("--scenes", type=int, default=10, help="seeded scenes per test goal")
-    parser.add_argument("--out", default="results/multitask/blue_sensitivity.json")
+    parser.add_argument("--out", default="results/side/multitask/blue_sensitivity.json")
     args = parser.parse_args()
 
     summary, policies = load_distilled(args.policies)

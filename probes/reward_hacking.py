@@ -7,7 +7,7 @@ relation is read on (metres: x right, y up for the front camera), beside Table 1
 so a reward the policy exploits shows as a geometry the oracle rejects (a block held too high
 to be "on top of", say).
 
-    python benchmarks/reward_hacking.py runs/rl/stack-zsrm-0/policy --episodes 20 \
+    python probes/reward_hacking.py runs/rl/stack-zsrm-0/policy --episodes 20 \
         --out results/rl/reward_hacking_stack.json
 """
 from __future__ import annotations
@@ -18,13 +18,14 @@ from dataclasses import asdict, replace
 import numpy as np
 
 from zsrm.rewards import VecZeroShotReward
-from zsrm.rl.envs import make_reward, make_vec, task_entry
+from zsrm.rl.envs import make_reward, make_vec
+from zsrm.rl.goals import task_entry
 from zsrm.rl.evaluate import eval_seed
 from zsrm.rl.features import policy_view
 from zsrm.rl.policy import PolicyBundle
 from zsrm.tasks.relations import RELATIONS, WORLD_THRESHOLDS, camera_plane
 from zsrm.vlm import load_vlm
-from zsrm.vlm.files import write_json
+from zsrm.common.files import write_json
 
 
 def score_rollouts(policy: str, episodes: int, reward_model: str | None = None) -> dict[str, np.ndarray]:
@@ -77,7 +78,7 @@ def main() -> None:
                        "reward_model": args.reward_model or "the policy's own",
                        "offset": "first goal object minus second, in the plane of the camera the relation is "
                                  "read on (metres)",
-                       "command": f"python benchmarks/reward_hacking.py {args.policy} --episodes {args.episodes} "
+                       "command": f"python probes/reward_hacking.py {args.policy} --episodes {args.episodes} "
                                   + (f"--reward-model {args.reward_model} " if args.reward_model else "")
                                   + f"--out {args.out}"}
     write_json(args.out, summary)

@@ -13,7 +13,7 @@ Every loader reads its folder through :func:`read_config` and :func:`load_weight
 kind's config dataclass (:func:`parse_fields`); :func:`load_weights` reads the safetensors
 header itself (:func:`read_header`: readable, not truncated) and checks its tensor names,
 shapes and dtypes against the module the config describes. Every failure is one
-:class:`~zsrm.vlm.files.ZsrmFileError` naming the file and what is wrong.
+:class:`~zsrm.common.files.ZsrmFileError` naming the file and what is wrong.
 
 >>> import tempfile, torch
 >>> folder = tempfile.mkdtemp()
@@ -31,7 +31,7 @@ import typing
 from pathlib import Path
 from typing import Any, Callable
 
-from zsrm.vlm.files import ZsrmFileError, atomic_path, json_type, read_json, write_json
+from zsrm.common.files import ZsrmFileError, atomic_path, json_type, read_json, write_json
 
 CONFIG_FILE = "config.json"
 WEIGHTS_FILE = "model.safetensors"
@@ -96,7 +96,7 @@ def parse_fields(cls: type | dict, data: Any, where: str):
     >>> parse_fields(Size, {"width": "3"}, "config.json")
     Traceback (most recent call last):
     ...
-    zsrm.vlm.files.ZsrmFileError: config.json: width must be an integer, got the string '3'
+    zsrm.common.files.ZsrmFileError: config.json: width must be an integer, got the string '3'
     """
     if isinstance(cls, dict):
         cls = dataclasses.make_dataclass("Fields", list(cls.items()))

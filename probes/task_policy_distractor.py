@@ -15,10 +15,10 @@ scene, the third colour in line on the far side of the moved block from its base
 policies were trained (from the two-block ones) and act. There a policy that reads its base's
 colour stacks on the base; one that does not, on either block about as often.
 
-    OMP_NUM_THREADS=1 python benchmarks/task_policy_distractor.py \\
-        --out results/multitask/task_policy_distractor.json
-    OMP_NUM_THREADS=1 python benchmarks/task_policy_distractor.py \\
-        --choice-policies results/multitask/choice/task_policies --out results/multitask/choice/task_policy_distractor.json
+    OMP_NUM_THREADS=1 python probes/task_policy_distractor.py \\
+        --out results/side/multitask/task_policy_distractor.json
+    OMP_NUM_THREADS=1 python probes/task_policy_distractor.py \\
+        --choice-policies results/multitask/choice/task_policies --out results/side/multitask/choice/task_policy_distractor.json
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ from zsrm.rl.features import policy_view
 from zsrm.rl.policy import PolicyBundle
 from zsrm.tasks.catalogue import TRAIN_TASKS, choice_colour
 from zsrm.vlm import load_vlm
-from zsrm.vlm.files import write_json
+from zsrm.common.files import write_json
 
 
 def main() -> None:
@@ -48,7 +48,7 @@ def main() -> None:
     parser.add_argument("--choice-policies", default=None,
                         help="the stacking policies trained in choice scenes (zsrm multitask-policies --choice): "
                              "also score them there")
-    parser.add_argument("--out", default="results/multitask/task_policy_distractor.json")
+    parser.add_argument("--out", default="results/side/multitask/task_policy_distractor.json")
     args = parser.parse_args()
 
     tasks = [t for t in TRAIN_TASKS if t.relation == "on_top_of"][:args.tasks]
