@@ -14,7 +14,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from zsrm.cli.options import add_command, from_namespace  # noqa: E402
-from zsrm.pipeline import build, demo, distill, goals, learn, measure, reproduce  # noqa: E402
+from zsrm.pipeline import build, demo, distill, goals, learn, measure, reproduce, results_page  # noqa: E402
 
 COMMANDS = {
     "parse-goal": goals.ParseGoal,
@@ -42,6 +42,7 @@ COMMANDS = {
     "distill": distill.Distill,
     "eval-multitask": distill.EvalMultitask,
     "reproduce": reproduce.Reproduce,
+    "results-page": results_page.ResultsPage,
 }
 
 
@@ -60,7 +61,7 @@ def main(argv=None) -> int:
     try:
         return from_namespace(args.options_class, args).run() or 0
     except (GoalError, ValueError, OSError) as err:
-        # Bad input, a bad or missing file, a path that cannot be written (zsrm.vlm.files.ZsrmFileError is a
+        # Bad input, a bad or missing file, a path that cannot be written (zsrm.common.files.ZsrmFileError is a
         # ValueError): one clear line, no traceback (ZSRM_DEBUG=1 shows it).
         if os.environ.get("ZSRM_DEBUG"):
             raise

@@ -1,0 +1,293 @@
+"""``results/README.md`` and README.md's headline table, written from the committed result files.
+
+Each canonical figure is one :class:`Figure`: the file under ``results/`` it is read from, how
+its value is read and written, and the command that made the file. ``zsrm results-page`` writes
+the page and the headline table between README.md's two markers; ``tests/test_results_page.py``
+fails when either differs from what the files say, so no number is typed by hand. After a
+result file changes, run ``zsrm results-page`` again.
+
+>>> figure = Figure("Example", "example.json", lambda d: f"{d['ratio']:.2f}", "zsrm example")
+>>> figure.row({"ratio": 4.1439})
+'| Example | 4.14 | [`example.json`](example.json) | `zsrm example` |'
+"""
+from __future__ import annotations
+
+import csv
+import fnmatch
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from zsrm.common.files import write_text
+
+PAGE = "results/README.md"
+HEADLINE_START = "<!-- headline: written by `zsrm results-page` from results/; do not edit by hand -->"
+HEADLINE_END = "<!-- end of headline -->"
+
+
+@dataclass(frozen=True)
+class Figure:
+    name: str  # what is measured, in a few words
+    file: str  # relative to results/
+    value: Callable[[dict], str]  # the value as written, from the file's JSON
+    command: str  # the command that writes the file
+    headline: bool = True  # also a row of README.md's headline table
+
+    def row(self, data: dict, link_prefix: str = "") -> str:
+        return f"| {self.name} | {self.value(data)} | [`{self.file}`]({link_prefix}{self.file}) | `{self.command}` |"
+
+
+def _pm(entry: dict, mean: str = "final_mean", se: str = "final_se") -> str:
+    return f"{entry[mean]:.1f} +- {entry[se]:.1f}"
+
+
+def _slash(values, fmt: str = "{:.2f}") -> str:
+    return " / ".join(fmt.format(v) for v in values)
+
+
+def _figure5(rows: dict) -> str:
+    from zsrm.evaluation.curves import summarise
+
+    rho = summarise(rows["rows"])["base_reward"]["spearman_with_closeness"]
+    return f"rank correlation of the base reward with closeness {rho:.2f} (it does not rise as the pucks meet)"
+
+
+def _figure6(d: dict) -> str:
+    tasks = ("stack", "place_right", "push_close")
+    return "; ".join(f"{t} {_slash((d[t][r]['final_mean'] for r in ('zsrm', 'oracle', 'base')), '{:.1f}')}"
+                     for t in tasks) + " (zsrm / oracle / base)"
+
+
+def _learning(d: dict) -> str:
+    tasks = ("stack", "place_right", "push_close")
+    return "; ".join(f"{t} {_slash((d[t][r]['final_mean'] for r in ('zsrm', 'oracle', 'random')), '{:.1f}')}"
+                     for t in tasks) + " (zsrm / oracle / random)"
+
+
+def _table2(d: dict) -> str:
+    policies = ("language", "primitive", "none")
+    return "; ".join(f"{spread} {_slash((d[p][spread]['test']['mean'] for p in policies), '{:.1f}')}"
+                     for spread in ("seen", "unseen")) + " (language / primitive / none)"
+
+
+def _table2_seeds(d: dict) -> str:
+    gaps = d["test_gaps"]["language-primitive"]
+    return (f"language above primitive by more than two s.e. in {gaps['seen']['holds_in']} seeds (seen), "
+            f"{gaps['unseen']['holds_in']} (unseen); mean gap +{gaps['seen']['mean']:.1f} / "
+            f"+{gaps['unseen']['mean']:.1f}")
+
+
+def _choice(d: dict) -> str:
+    return (f"grounded {_slash((d['grounded'][s]['test']['mean'] for s in ('seen', 'unseen')), '{:.1f}')}, "
+            f"language {_slash((d['language'][s]['test']['mean'] for s in ('seen', 'unseen')), '{:.1f}')}, "
+            f"primitive {_slash((d['primitive'][s]['test']['mean'] for s in ('seen', 'unseen')), '{:.1f}')} "
+            "(test tasks, seen / unseen)")
+
+
+def _reward_f1(d: dict) -> str:
+    zsrm, base = [v["f1"] for v in d["zsrm"].values()], [v["f1"] for v in d["base"].values()]
+    return (f"{min(zsrm):.2f} to {max(zsrm):.2f} over {len(zsrm)} tasks (the base reward: "
+            f"{min(base):.2f} to {max(base):.2f})")
+
+
+def _scripted(d: dict) -> str:
+    rates = [v for k, v in d.items() if k != "meta"]
+    spread = f"{min(rates):.2f}" if min(rates) == max(rates) else f"{min(rates):.2f} to {max(rates):.2f}"
+    return f"{spread} on each of {len(rates)} tasks"
+
+
+LEARNING = "zsrm sweep --tasks stack place_right push_close --rewards oracle zsrm random --seeds 0 1 2"
+FIGURE6 = ("zsrm sweep --config v1 --root runs/rl-v1 --tasks stack place_right push_close pendulum --rewards oracle "
+           "zsrm base vice curiosity random --seeds 0 1 2 3 4 --reward-model student@978a53be9a61 "
+           "--out results/rl/v1/summary.json")
+
+FIGURES = [
+    # the paper's figures
+    Figure("Figure 3: Grad-CAM localisation, median error front / left / tilted (px)", "grounding.json",
+           lambda d: _slash(d[f"median_px_error.{c}"] for c in ("front", "left", "tilted")),
+           "zsrm eval-grounding data/grounding-box --labels labels-refined --out results/grounding.json "
+           "--figure results/figure3.png"),
+    Figure("Figure 3: labeler F1, left of / in front of / in between / on top of / close to / inside of",
+           "grounding.json",
+           lambda d: _slash(d[f"f1.{r}"] for r in ("left_of", "in_front_of", "in_between", "on_top_of", "close_to",
+                                                   "inside_of")),
+           "zsrm eval-grounding data/grounding-box --labels labels-refined --out results/grounding.json"),
+    Figure("Figure 4: pendulum oracle return, base / oracle reward", "rl/v1/summary.json",
+           lambda d: f"{_pm(d['pendulum']['base'])} / {_pm(d['pendulum']['oracle'])}", FIGURE6),
+    Figure("Figure 5: base reward along a scripted push", "figure5.csv", _figure5,
+           "zsrm reward-curve --out results/figure5"),
+    Figure("Figure 6: final oracle episode reward (v1 configuration)", "rl/v1/summary.json", _figure6, FIGURE6),
+    Figure("Table 2: distilled policies on the blue test tasks", "table2.json", _table2,
+           "zsrm eval-multitask --seeds 50 --out results/table2.json"),
+    # zsrm's own claims
+    Figure("Scripted controllers reach every goal (success)", "scripted_success.json", _scripted,
+           "zsrm scripted-eval --episodes 20 --out results/scripted_success.json"),
+    Figure("Goal sentences read right / must-refuse refused", "goals.json",
+           lambda d: f"{d['accuracy']:.3f} / {d['refusal_accuracy']:.3f}", "zsrm eval-goals --out results/goals.json"),
+    Figure("Scene VLM presence AUROC, red / green / yellow / blue", "vlm_presence.json",
+           lambda d: _slash((d[f"auroc.{c}"] for c in ("red", "green", "yellow", "blue")), "{:.3f}"),
+           "zsrm eval-vlm --vlm scene --images 500 --seed 0 --out results/vlm_presence.json"),
+    Figure("Pendulum VLM names the pose right", "pendulum_pose.json", lambda d: f"{d['accuracy']:.3f}",
+           "zsrm eval-pose --vlm scene-pendulum --images 400 --out results/pendulum_pose.json"),
+    Figure("Full reward model (shipped student), F1 against the oracle", "reward_eval.json", _reward_f1,
+           "zsrm eval-reward --zsrm student --tasks stack place_left place_right push_close place_below "
+           "place_between place_front place_behind place_inside --distractor-tasks stack --out results/reward_eval.json"),
+    Figure("Learning from pixels, default configuration, final oracle episode reward", "rl/learning.json",
+           _learning, LEARNING + " --out results/rl/learning.json"),
+    Figure("Table 2 over four distillation seeds", "multitask/table2_centred_seeds.json", _table2_seeds,
+           "python benchmarks/table2_seeds.py results/table2.json results/multitask/table2_seed1.json "
+           "results/multitask/table2_seed2.json results/multitask/table2_seed3.json --language results/table2.json "
+           "results/multitask/table2_centred_seed1.json results/multitask/table2_centred_seed2.json "
+           "results/multitask/table2_centred_seed3.json --out results/multitask/table2_centred_seeds.json"),
+    Figure("Table 2 in choice scenes: the base found by colour", "multitask/table2_choice.json", _choice,
+           "zsrm eval-multitask --policies runs/multitask/distill-choice --data data/multitask/rollouts-choice "
+           "--seeds 50 --out results/multitask/table2_choice.json"),
+    Figure("`make demo`: zsrm-trained policy / random on place_right", "demo.json",
+           lambda d: f"{_pm(d, 'zsrm_policy_mean', 'zsrm_policy_se')} / {_pm(d, 'random_policy_mean', 'random_policy_se')}",
+           "make demo"),
+    Figure("Bad files and paths end in one clean line", "robustness.json",
+           lambda d: f"{d['clean']} of {d['tried']} cases, {d['ran_code']} ran code from a file",
+           "OMP_NUM_THREADS=1 python benchmarks/robustness.py --out results/robustness.json"),
+    # speed
+    Figure("Env steps/s, one / three 64 px cameras", "env_speed.json",
+           lambda d: _slash((d["steps_per_s_1cam_64"], d["steps_per_s_3cam_64"]), "{:.0f}"),
+           "python benchmarks/env_speed.py --out results/env_speed.json"),
+    Figure("Batched rewards vs one call per env (speedup)", "reward_batching.json", lambda d: f"{d['ratio']:.1f}x",
+           "python benchmarks/reward_batching.py --out results/reward_batching.json"),
+    Figure("Grad-CAM, batched head-only gradients vs one backward per phrase (speedup)", "gradcam_speed.json",
+           lambda d: f"{d['ratio']:.2f}x", "python benchmarks/gradcam_speed.py --out results/gradcam_speed.json"),
+    Figure("Rewards/s, student vs fine-tuned VLM", "reward_speed.json",
+           lambda d: f"{d['student_rewards_per_s']:,.0f} vs {d['vlm_rewards_per_s']:,.0f} ({d['ratio']:.1f}x)",
+           "python benchmarks/reward_speed.py --vlm runs/zsrm/vlm --student runs/zsrm/student "
+           "--out results/reward_speed.json"),
+    Figure("Whole `zsrm train` runs, env steps/s: default vs v1", "ppo_speed.json",
+           lambda d: f"{d['configs']['cpu']['train_steps_per_s']:.0f} vs {d['configs']['v1']['train_steps_per_s']:.0f} "
+                     f"({d['speedup']:.2f}x)",
+           "python benchmarks/ppo_speed.py --out results/ppo_speed.json"),
+]
+
+# Side experiments, under results/side/: a glob relative to results/ and what the files show.
+SIDE = [
+    ("side/box/grounding_*.json", "the box located by Grad-CAM of three box-aware VLMs, without the silhouette "
+     "refinement: 3.6 to 16.7 px median error, `f1.inside_of` 0.00 for all three (docs/grounding.md)"),
+    ("side/reward_eval_finetuned_vlm.json", "the fine-tuned scene VLM and the student trained beside it, on the scenes "
+     "before issue 11 (4 tasks; not rerun since)"),
+    ("side/pendulum_pose_scene.json", "the scene VLM, which never saw the pendulum, calls every frame upright "
+     "(accuracy 0.24)"),
+    ("side/multitask/table2_seed0.*", "Table 2 with raw (uncentred) goal embeddings, distillation seed 0"),
+    ("side/multitask/table2_seeds.json", "raw goal embeddings over four seeds: language above primitive with two "
+     "seeds of four"),
+    ("side/multitask/table2_span_*", "raw goal embeddings projected onto the training goals' span (`--text-span`): "
+     "no change beyond the standard errors"),
+    ("side/multitask/table2_centred_span_*", "centred goal embeddings, projected as well: no change beyond the "
+     "standard errors; centring alone is what helps"),
+    ("side/multitask/table2_view_colour.*", "the paper's three policies reading colour frames: none follows blue "
+     "goals (test 0.4 to 1.3)"),
+    ("side/multitask/table2_joint.*", "the VLM's joint image-text embedding of the goal, colour frames: no better"),
+    ("side/multitask/table2_grounded*", "zsrm's grounded policy with each `--keypoint-view` (none, shape, grey, "
+     "colour) and distillation seed 1"),
+    ("side/multitask/blue_sensitivity*.json", "moving the blue block moves the policies' keypoints and actions as much "
+     "as moving a training colour's: seeing blue is not what differs"),
+    ("side/multitask/goal_probe_*.json", "the distilled policies reading another goal's sentence on a goal's scenes: "
+     "the goal's colours do not matter to them"),
+    ("side/multitask/grounded_nearest_goal_*.json", "the grounded policy reading its nearest training goal instead of "
+     "the test goal scores 0.00 on every test task: a primitive code does not help it"),
+    ("side/multitask/task_policy_distractor.json", "the two-block task policies with a third block added: disrupted, "
+     "but not stacking on it as their base"),
+    ("side/multitask/choice/task_policy_distractor.json", "the choice-scene task policies stack on their base, almost "
+     "never on the third block"),
+    ("side/multitask/choice/base_probe.json", "which block each distilled policy stacks on in choice scenes: only the "
+     "grounded one finds its base by colour"),
+]
+
+# Files beside the figures: plots and tables of them, the models and runs they come from.
+OTHER = [
+    ("README.md", "this page"),
+    ("figure3.png", "Figure 3: Grad-CAM heat maps and their points"),
+    ("figure5.png", "Figure 5's plot"),
+    ("vlm_presence.png", "the scene VLM's presence ROC curves"),
+    ("table2.*", "Table 2 as CSV, markdown and a bar plot"),
+    ("reward_curves/*", "base and zsrm reward along scripted episodes of each task (written with reward_eval.json)"),
+    ("multitask/policies.*", "the 18 zsrm-trained task policies' training summary (the ceiling of Table 2)"),
+    ("multitask/task_policies/**", "the 18 task policies themselves, read by `zsrm multitask-rollouts`"),
+    ("multitask/trials/*", "their trial summaries, so a rerun of the sweep skips them"),
+    ("multitask/table2_seed[123].*", "Table 2 with distillation seeds 1-3 (raw goal embeddings; primitive and none)"),
+    ("multitask/table2_centred_seed[123].*", "the centred language policy with distillation seeds 1-3"),
+    ("multitask/table2_choice.*", "Table 2 in choice scenes as CSV, markdown and a bar plot"),
+    ("multitask/choice/policies.*", "the six choice-scene stacking task policies' training summary"),
+    ("multitask/choice/task_policies/**", "those policies, read by `zsrm multitask-rollouts --choice-policies`"),
+    ("multitask/choice/trials/*", "their trial summaries"),
+    ("rl/**", "learning runs, Figures 4 and 6 trials, the training-speed profile, pilots and reward-hacking "
+     "diagnostics (docs/training.md, docs/training-speed.md)"),
+]
+
+
+def _read(results: Path, file: str) -> dict:
+    path = results / file
+    if path.suffix == ".csv":
+        with path.open() as f:
+            return {"rows": [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]}
+    return json.loads(path.read_text())
+
+
+def figure_rows(results: Path, link_prefix: str = "", headline_only: bool = False) -> list[str]:
+    """One markdown table row per figure, its value read from its file."""
+    return [f.row(_read(results, f.file), link_prefix) for f in FIGURES if f.headline or not headline_only]
+
+
+def headline(results: Path = Path("results")) -> str:
+    """README.md's headline table, between its markers: figure, value, file (commands on the page)."""
+    rows = [" | ".join(row.split(" | ")[:3]) + " |" for row in figure_rows(results, "results/", headline_only=True)]
+    return "\n".join([HEADLINE_START, "| result | value | file |", "|---|---|---|", *rows, HEADLINE_END])
+
+
+def page(results: Path = Path("results")) -> str:
+    """results/README.md: every canonical figure with its value and command, then what else is here."""
+    lines = ["# Results", "",
+             "Written by `zsrm results-page` from the files it names; do not edit by hand. Each figure's value is",
+             "read from its file, so this page and README.md's headline table change only when a file does.",
+             "Measured on the project's 2-core x86_64 CPU machine (no GPU) unless a file says otherwise;",
+             "`make results` reruns every command.", "",
+             "## Canonical figures", "", "| figure | value | file | command |", "|---|---|---|---|",
+             *figure_rows(results), "",
+             "## Side experiments (`side/`)", "",
+             "Measured on the way to the figures above: what was tried, what did not help, and why.", "",
+             *(f"* `{pattern}`: {what}" for pattern, what in SIDE), "",
+             "## Other files", "", *(f"* `{pattern}`: {what}" for pattern, what in OTHER), ""]
+    return "\n".join(lines)
+
+
+def unlisted(results: Path = Path("results"), files: list[str] | None = None) -> list[str]:
+    """Files under results/ that neither a figure nor a line of the page names."""
+    patterns = [f.file for f in FIGURES] + [p for p, _ in SIDE + OTHER]
+    files = files if files is not None else [str(p.relative_to(results)) for p in results.rglob("*") if p.is_file()]
+    # fnmatch's * spans folders too
+    return sorted(f for f in files if not any(fnmatch.fnmatch(f, p.replace("**", "*")) for p in patterns))
+
+
+def readme_with_headline(readme: str, results: Path = Path("results")) -> str:
+    """README.md's text with the table between its markers replaced by :func:`headline`."""
+    start, end = readme.index(HEADLINE_START), readme.index(HEADLINE_END) + len(HEADLINE_END)
+    return readme[:start] + headline(results) + readme[end:]
+
+
+@dataclass
+class ResultsPage:
+    """Write results/README.md and README.md's headline table from the result files."""
+
+    results: str = "results"  # the results folder
+    readme: str = "README.md"  # the README whose headline table to rewrite ('' to skip)
+    check: bool = False  # write nothing; exit 1 if either file differs from what would be written
+
+    def run(self) -> int:
+        results = Path(self.results)
+        wanted = {results / "README.md": page(results)}
+        if self.readme:
+            wanted[Path(self.readme)] = readme_with_headline(Path(self.readme).read_text(), results)
+        stale = [path for path, text in wanted.items() if not path.is_file() or path.read_text() != text]
+        for path in stale:
+            print(f"{'differs' if self.check else 'wrote'}: {path}")
+            if not self.check:
+                write_text(path, wanted[path])
+        return 1 if self.check and stale else 0
