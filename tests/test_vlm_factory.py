@@ -1,4 +1,4 @@
-"""load_vlm specs (zsrm/vlm/factory.py, zsrm/vlm/registry.py) and the torchvision import guard (zsrm/vlm/compat.py)."""
+"""load_vlm specs (zsrm/vlm/factory.py, zsrm/common/registry.py) and the torchvision import guard (zsrm/vlm/compat.py)."""
 import json
 from pathlib import Path
 

@@ -10,6 +10,9 @@ the command line into one of them (:mod:`zsrm.cli`).
   reward, reward-curve, eval-grounding, eval-reward);
 * :mod:`zsrm.pipeline.goals`: goal sentences (parse-goal, eval-goals);
 * :mod:`zsrm.pipeline.demo`: the offline main job's report (``zsrm demo``).
+* :mod:`zsrm.pipeline.reproduce` and :mod:`zsrm.pipeline.report`: ``zsrm reproduce`` and its report;
+* :mod:`zsrm.pipeline.results_page`: ``results/README.md`` and README.md's headline table, read from
+  the result files (``zsrm results-page``).
 """
 from __future__ import annotations
 
