@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import argparse
 
+from zsrm.common.files import read_json, write_json
 from zsrm.evaluation.multitask import POLICY_NAMES, SPLITS, SPREADS
 from zsrm.rl.evaluate import mean_se
-from zsrm.common.files import read_json, write_json
 
 GAPS = (("language", "primitive"), ("primitive", "none"))
 

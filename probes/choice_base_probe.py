@@ -16,14 +16,14 @@ import argparse
 
 from tqdm import tqdm
 
+from zsrm.common.files import write_json
+from zsrm.envs.tabletop import TabletopEnv
 from zsrm.evaluation.multitask import EVAL_SEED, OnThirdBlock, split_goals, task_episodes, task_seed
 from zsrm.policy.models import embed_goals
 from zsrm.policy.training import load_distilled
-from zsrm.envs.tabletop import TabletopEnv
 from zsrm.rl.evaluate import mean_se_cell
 from zsrm.tasks.language import parse_goal
 from zsrm.vlm import load_vlm
-from zsrm.common.files import write_json
 
 
 def main() -> None:

@@ -17,6 +17,7 @@ import mujoco
 import numpy as np
 import torch
 
+from zsrm.common.files import write_json
 from zsrm.envs.tabletop import BLOCK_HALF
 from zsrm.evaluation.multitask import EVAL_SEED, split_goals
 from zsrm.policy.models import embed_goals, view_frames
@@ -26,7 +27,6 @@ from zsrm.rl.envs import make_vec
 from zsrm.rl.evaluate import mean_se
 from zsrm.tasks.language import parse_goal
 from zsrm.vlm import load_vlm
-from zsrm.common.files import write_json
 
 
 @torch.no_grad()

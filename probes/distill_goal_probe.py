@@ -24,13 +24,13 @@ import argparse
 
 from tqdm import tqdm
 
+from zsrm.common.files import write_json
 from zsrm.evaluation.multitask import EVAL_SEED, split_goals, task_rewards, task_seed
 from zsrm.policy.models import embed_goals
 from zsrm.policy.training import load_distilled
 from zsrm.rl.evaluate import mean_se_cell
 from zsrm.tasks.language import Task, parse_goal
 from zsrm.vlm import load_vlm
-from zsrm.common.files import write_json
 
 PROBED = ("language", "primitive")
 

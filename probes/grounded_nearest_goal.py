@@ -18,11 +18,11 @@ import argparse
 import torch
 from tqdm import tqdm
 
+from zsrm.common.files import write_json
 from zsrm.evaluation.multitask import EVAL_SEED, split_goals, task_rewards, task_seed
 from zsrm.policy.models import embed_goals, load_policy
 from zsrm.rl.evaluate import mean_se_cell
 from zsrm.vlm import load_vlm
-from zsrm.common.files import write_json
 
 MAPPINGS = ("language", "grounded")
 

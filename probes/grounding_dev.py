@@ -19,8 +19,8 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from zsrm.data.collect import CollectConfig, collect  # noqa: E402
 from zsrm.evaluation.grounding_quality import evaluate_grounding  # noqa: E402
-from zsrm.grounding.annotate import LabelConfig, label_dataset  # noqa: E402
 from zsrm.grounding import silhouette  # noqa: E402
+from zsrm.grounding.annotate import LabelConfig, label_dataset  # noqa: E402
 from zsrm.grounding.gradcam import LOCATE  # noqa: E402
 from zsrm.tasks.relations import RELATIONS  # noqa: E402
 

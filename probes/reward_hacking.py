@@ -17,15 +17,15 @@ from dataclasses import asdict, replace
 
 import numpy as np
 
+from zsrm.common.files import write_json
 from zsrm.rewards import VecZeroShotReward
 from zsrm.rl.envs import make_reward, make_vec
-from zsrm.rl.goals import task_entry
 from zsrm.rl.evaluate import eval_seed
 from zsrm.rl.features import policy_view
+from zsrm.rl.goals import task_entry
 from zsrm.rl.policy import PolicyBundle
 from zsrm.tasks.relations import RELATIONS, WORLD_THRESHOLDS, camera_plane
 from zsrm.vlm import load_vlm
-from zsrm.common.files import write_json
 
 
 def score_rollouts(policy: str, episodes: int, reward_model: str | None = None) -> dict[str, np.ndarray]:

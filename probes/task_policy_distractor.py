@@ -18,7 +18,8 @@ colour stacks on the base; one that does not, on either block about as often.
     OMP_NUM_THREADS=1 python probes/task_policy_distractor.py \\
         --out results/side/multitask/task_policy_distractor.json
     OMP_NUM_THREADS=1 python probes/task_policy_distractor.py \\
-        --choice-policies results/multitask/choice/task_policies --out results/side/multitask/choice/task_policy_distractor.json
+        --choice-policies results/multitask/choice/task_policies \\
+        --out results/side/multitask/choice/task_policy_distractor.json
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from zsrm.common.files import write_json
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.evaluation.multitask import OnThirdBlock, task_seed
 from zsrm.policy.rollouts import policy_folder
@@ -37,7 +39,6 @@ from zsrm.rl.features import policy_view
 from zsrm.rl.policy import PolicyBundle
 from zsrm.tasks.catalogue import TRAIN_TASKS, choice_colour
 from zsrm.vlm import load_vlm
-from zsrm.common.files import write_json
 
 
 def main() -> None:

@@ -12,6 +12,7 @@ import torch
 
 from zsrm.cli import build_parser
 from zsrm.cli.options import from_namespace
+from zsrm.common.files import ZsrmFileError
 from zsrm.pipeline.distill import Distill, EvalMultitask, MultitaskRollouts, train_goals
 from zsrm.policy.models import (SHAPE_GREY, DistilledPolicy, PolicyConfig, embed_goals, grey_frames, load_policy,
                                 resnet18, save_policy, shape_frames)
@@ -24,7 +25,6 @@ from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
 from zsrm.tasks.language import parse_goal
 from zsrm.testing import hostile as H
 from zsrm.vlm import load_vlm
-from zsrm.common.files import ZsrmFileError
 from zsrm.vlm.scene import SceneConfig
 
 TINY = dict(steps=256, n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=2, eval_every=128,

@@ -14,13 +14,13 @@ import pytest
 import torch
 
 from zsrm.cli import COMMANDS, main
+from zsrm.common.checkpoints import adamw, load_optimizer, read_checkpoint_state, save_checkpoint
+from zsrm.common.files import ZsrmFileError, atomic_path, check_writable, write_json
+from zsrm.common.registry import save_folder, save_weights
 from zsrm.data.collect import CollectConfig, collect
 from zsrm.data.dataset import ExplorationData
 from zsrm.data.shards import load_npz, read_manifest
 from zsrm.testing import hostile as H
-from zsrm.common.files import ZsrmFileError, atomic_path, check_writable, write_json
-from zsrm.common.checkpoints import adamw, load_optimizer, read_checkpoint_state, save_checkpoint
-from zsrm.common.registry import save_folder, save_weights
 
 KINDS = ["scene", "student", "adapted", "open_clip", "policy"]
 TINY_DATA = dict(images=4, shard_size=2, episode_steps=2, record_every=1, image_size=32)

@@ -1,12 +1,13 @@
-"""load_vlm specs (zsrm/vlm/factory.py, zsrm/common/registry.py) and the torchvision import guard (zsrm/vlm/compat.py)."""
+"""load_vlm specs (zsrm/vlm/factory.py, zsrm/common/registry.py) and the torchvision import guard
+(zsrm/vlm/compat.py)."""
 import json
 from pathlib import Path
 
 import pytest
 
 from zsrm.cli import main
-from zsrm.vlm import SHIPPED_SCENE_DIR, SceneVLM, create_scene_vlm, load_vlm
 from zsrm.common.registry import SHIPPED
+from zsrm.vlm import SHIPPED_SCENE_DIR, SceneVLM, create_scene_vlm, load_vlm
 
 
 def test_shipped_scene_model_missing_says_how_to_build_it(tmp_path, monkeypatch, capsys):

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
+from zsrm.common.files import ZsrmFileError, read_json
 from zsrm.data.shards import MANIFEST, load_npz, read_manifest
 from zsrm.tasks.lexicon import BOX
-from zsrm.common.files import ZsrmFileError, read_json
 
 LABELS = "labels"  # the default labels folder inside a dataset folder
 ORACLE = "oracle"  # inside the labels folder: true-coordinate captions, for evaluation only

@@ -15,11 +15,11 @@ from typing import Iterable
 
 import numpy as np
 
+from zsrm.common.files import check_writable, read_json, write_json
 from zsrm.data.shards import load_npz, save_npz
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import CAMERAS
-from zsrm.common.files import check_writable, read_json, write_json
 
 SCENES = tuple(SCENE_SHAPES)  # a render's "shape" is its scene's index here: 0 block, 1 puck
 STREAMS = {"train": 0, "eval": 1}  # disjoint seed streams for training and held-out scenes

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from zsrm.common.files import write_json, write_text
 from zsrm.data.dataset import LABELS, ExplorationData
 from zsrm.data.shards import load_npz, read_manifest
 from zsrm.envs.cameras import apply_homography
@@ -31,7 +32,6 @@ from zsrm.grounding.labeler import RelationTable, pixel_thresholds, relation_tup
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import RELATIONS
-from zsrm.common.files import write_json, write_text
 
 MIN_SUPPORT = 20  # fewer true positives than this: the F1 is reported but flagged as noisy
 

@@ -18,17 +18,17 @@ import torch
 
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
+from zsrm.common.files import write_json, write_text
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.policy.models import DistilledPolicy, embed_goals
 from zsrm.rl.config import STACKING, TrainConfig, goal_relation
 from zsrm.rl.envs import make_vec
-from zsrm.rl.goals import goal_camera
 from zsrm.rl.evaluate import mean_se_cell
+from zsrm.rl.goals import goal_camera
 from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS, choice_colours
 from zsrm.tasks.language import parse_goal
 from zsrm.tasks.relations import holds_in_world
-from zsrm.common.files import write_json, write_text
 
 EVAL_SEED = 3_000_000  # evaluation scenes: seeds apart from the training and collection envs'
 POLICY_NAMES = {"none": "No Conditioning", "primitive": "Primitive Code Cond.", "language": "Language Cond.",

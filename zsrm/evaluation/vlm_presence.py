@@ -16,13 +16,13 @@ import math
 import platform
 from pathlib import Path
 
+from zsrm.common.files import write_json
 from zsrm.data.renders import SCENES, render_presence_scenes
 from zsrm.evaluation.metrics import auroc
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import CAMERAS
 from zsrm.vlm.base import VisionLanguageModel
-from zsrm.common.files import write_json
 from zsrm.vlm.presence import min_visible_pixels, presence_scores
 
 

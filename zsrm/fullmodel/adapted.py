@@ -33,9 +33,9 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from zsrm.common.registry import build_model, load_folder, load_weights, read_config, register_kind, save_folder
 from zsrm.fullmodel.text import RoleTextFeatures, load_frozen_reference, portable_spec, stored_spec
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel
-from zsrm.common.registry import build_model, load_folder, load_weights, read_config, register_kind, save_folder
 from zsrm.vlm.text_cache import TextEmbeddingCache
 
 BACKEND = "zsrm-adapted"

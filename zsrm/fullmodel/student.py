@@ -24,10 +24,10 @@ import numpy as np  # noqa: F401  (doctest)
 import torch
 from torch import nn
 
+from zsrm.common.registry import (WEIGHTS_FILE, build_model, folder_kind, load_weights, read_config, register_kind,
+                                  register_shipped, save_folder)
 from zsrm.fullmodel.text import RoleTextFeatures, load_frozen_reference, portable_spec, stored_spec
 from zsrm.vlm.base import ImageBatch, VisionLanguageModel, check_image_tower, pixels_from_images
-from zsrm.common.registry import (WEIGHTS_FILE, build_model, folder_kind, load_weights, read_config, register_kind,
-                               register_shipped, save_folder)
 from zsrm.vlm.text_cache import TextEmbeddingCache
 
 BACKEND = "zsrm-student"

@@ -31,6 +31,9 @@ import numpy as np
 import torch
 from torch import nn
 
+from zsrm.common.checkpoints import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
+from zsrm.common.files import atomic_path, write_json
+from zsrm.common.registry import load_weights, save_weights
 from zsrm.data.dataset import LABELS
 from zsrm.fullmodel.adapted import AdaptedVLM
 from zsrm.fullmodel.pairs import CaptionedImages, caption_relation
@@ -38,10 +41,7 @@ from zsrm.fullmodel.student import StudentConfig, StudentRewardNet
 from zsrm.tasks.negatives import candidate_texts
 from zsrm.vlm.base import VisionLanguageModel
 from zsrm.vlm.factory import DEFAULT_VLM, load_vlm
-from zsrm.common.files import atomic_path, write_json
 from zsrm.vlm.losses import multi_positive_contrastive_loss
-from zsrm.common.checkpoints import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
-from zsrm.common.registry import load_weights, save_weights
 
 CHECKPOINT_WEIGHTS = "weights.safetensors"
 STUDENT_PRESETS = {

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from zsrm.common.files import check_writable
 from zsrm.data.collect import CollectConfig
 from zsrm.data.dataset import LABELS
 from zsrm.fullmodel.training import FinetuneConfig
@@ -20,7 +21,6 @@ from zsrm.grounding.annotate import LabelConfig
 from zsrm.pipeline import narrow
 from zsrm.tasks.relations import WORLD_THRESHOLDS
 from zsrm.vlm.factory import DEFAULT_VLM
-from zsrm.common.files import check_writable
 from zsrm.vlm.pretrain import PretrainConfig, check_config
 
 

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
+from zsrm.common.files import atomic_path, check_writable, write_json, write_text
 from zsrm.envs.rollout import camera_strip, episode_steps, make_env, random_policy, run_episode
 from zsrm.envs.scripted import scripted_controller
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.tasks.catalogue import REPORT_TASKS
-from zsrm.common.files import atomic_path, check_writable, write_json, write_text
 from zsrm.vlm.factory import DEFAULT_VLM
 
 SCENES = {"tabletop": "stack", "pushing": "push_close", "pendulum": "pendulum"}

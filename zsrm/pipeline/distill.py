@@ -13,12 +13,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from zsrm.common.files import check_writable
 from zsrm.pipeline import narrow
 from zsrm.pipeline.learn import Sweep
 from zsrm.policy.training import DistillConfig
 from zsrm.rl.config import STACKING, goal_relation
 from zsrm.tasks.catalogue import TRAIN_TASKS
-from zsrm.common.files import check_writable
 
 POLICIES_ROOT = "runs/multitask/policies"
 POLICIES_SUMMARY = "results/multitask/policies.json"

@@ -61,9 +61,9 @@ class EvalGoals:
         return shlex.join(words + (["--out", str(self.out)] if self.out else []))
 
     def run(self) -> int:
+        from zsrm.common.files import check_writable
         from zsrm.evaluation.goal_parsing import score_goals
         from zsrm.pipeline.measure import write_json
-        from zsrm.common.files import check_writable
 
         if self.out:
             check_writable(self.out)

@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from zsrm.rl.config import PRESETS, REWARDS, TrainConfig
 from zsrm.common.files import check_writable, write_json
+from zsrm.rl.config import PRESETS, REWARDS, TrainConfig
 
 SWEEP_TASKS = ("stack", "place_right", "push_close")
 
@@ -172,8 +172,8 @@ class Plot:
     figure4: str | None = None  # where to write Figure 4, the pendulum's base vs oracle (needs pendulum runs)
 
     def run(self) -> int:
-        from zsrm.evaluation.learning_curves import PENDULUM, plot_figure4, plot_learning_curves
         from zsrm.common.files import read_json
+        from zsrm.evaluation.learning_curves import PENDULUM, plot_figure4, plot_learning_curves
 
         check_writable(self.figure4 or self.figure6)  # before any work
         summary = {task: rewards for task, rewards in read_json(self.summary).items() if task != "meta"}

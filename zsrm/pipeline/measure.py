@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from zsrm.common import files
 from zsrm.data.dataset import LABELS
 from zsrm.evaluation.curves import FIGURE5_GOAL
 from zsrm.tasks.catalogue import REPORT_TASKS, SPATIAL_TASKS
-from zsrm.common import files
 from zsrm.vlm.factory import DEFAULT_VLM
 
 
@@ -308,9 +308,9 @@ class EvalReward:
 
     def _models(self) -> tuple[dict, dict, object]:
         """(name -> spec, name -> ZSRMReward, the base VLM)."""
+        from zsrm.common.registry import SHIPPED
         from zsrm.fullmodel import load_reward_backbone
         from zsrm.rewards.binarised import ZSRMReward
-        from zsrm.common.registry import SHIPPED
 
         names = {"zsrm": self.zsrm}
         for item in self.compare:

@@ -132,7 +132,8 @@ FIGURES = [
            "zsrm eval-pose --vlm scene-pendulum --images 400 --out results/pendulum_pose.json"),
     Figure("Full reward model (shipped student), F1 against the oracle", "reward_eval.json", _reward_f1,
            "zsrm eval-reward --zsrm student --tasks stack place_left place_right push_close place_below "
-           "place_between place_front place_behind place_inside --distractor-tasks stack --out results/reward_eval.json"),
+           "place_between place_front place_behind place_inside --distractor-tasks stack "
+           "--out results/reward_eval.json"),
     Figure("Learning from pixels, default configuration, final oracle episode reward", "rl/learning.json",
            _learning, LEARNING + " --out results/rl/learning.json"),
     Figure("Table 2 over four distillation seeds", "multitask/table2_centred_seeds.json", _table2_seeds,
@@ -144,7 +145,8 @@ FIGURES = [
            "zsrm eval-multitask --policies runs/multitask/distill-choice --data data/multitask/rollouts-choice "
            "--seeds 50 --out results/multitask/table2_choice.json"),
     Figure("`make demo`: zsrm-trained policy / random on place_right", "demo.json",
-           lambda d: f"{_pm(d, 'zsrm_policy_mean', 'zsrm_policy_se')} / {_pm(d, 'random_policy_mean', 'random_policy_se')}",
+           lambda d: f"{_pm(d, 'zsrm_policy_mean', 'zsrm_policy_se')} / "
+                     f"{_pm(d, 'random_policy_mean', 'random_policy_se')}",
            "make demo"),
     Figure("Bad files and paths end in one clean line", "robustness.json",
            lambda d: f"{d['clean']} of {d['tried']} cases, {d['ran_code']} ran code from a file",

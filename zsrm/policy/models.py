@@ -40,11 +40,11 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from zsrm.common.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
 from zsrm.grounding.gradcam import GradCAM, head_gradcam
 from zsrm.rl.features import SpatialSoftmax
 from zsrm.tasks.language import parse_goal
 from zsrm.tasks.relations import RELATIONS
-from zsrm.common.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
 from zsrm.vlm.scene import SceneConfig, SceneImageTower, mean_max_pool
 
 KIND = "zsrm-multitask-policy"

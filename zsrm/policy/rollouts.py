@@ -55,8 +55,8 @@ def keep_task_policies(root: str | Path, keep: str | Path, trials) -> list[Path]
     finished sweep skips. Returns the policies of ``trials`` kept there, copied now or before."""
     import shutil
 
-    from zsrm.rl.sweep import is_finished
     from zsrm.common.files import atomic_path
+    from zsrm.rl.sweep import is_finished
 
     kept = []
     for trial in trials:
@@ -131,8 +131,8 @@ def collect_task(policy: str | Path, goal: str, episodes: int, envs: int) -> tup
     import torch
 
     from zsrm.rl.envs import make_vec
-    from zsrm.rl.goals import goal_camera
     from zsrm.rl.features import policy_view
+    from zsrm.rl.goals import goal_camera
     from zsrm.rl.policy import PolicyBundle
     from zsrm.vlm import load_vlm
 

@@ -20,12 +20,12 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from zsrm.common.checkpoints import load_optimizer, read_checkpoint_state, save_checkpoint
+from zsrm.common.files import read_json, write_json
+from zsrm.common.registry import load_weights
 from zsrm.policy.models import (CONDITIONINGS, IMAGE_VIEWS, KEYPOINT_VIEWS, DistilledPolicy, PolicyConfig,
                                 embed_goals, load_policy, save_policy)
 from zsrm.policy.rollouts import RolloutData
-from zsrm.common.files import read_json, write_json
-from zsrm.common.checkpoints import load_optimizer, read_checkpoint_state, save_checkpoint
-from zsrm.common.registry import load_weights
 
 # cpu reads grey frames: the scene VLM's trunk, pretrained on which colours are present, gives features
 # so colour-bound that, read in colour, none of the paper's three follows a colour it never saw

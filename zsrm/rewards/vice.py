@@ -23,8 +23,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from zsrm.rewards.interface import RewardModel, check_images
 from zsrm.common.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
+from zsrm.rewards.interface import RewardModel, check_images
 
 KIND = "zsrm-vice"
 

@@ -15,11 +15,11 @@ from typing import Callable
 
 import numpy as np
 
+from zsrm.common.files import atomic_path
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.envs import make_vec
 from zsrm.rl.goals import goal_camera, is_pendulum
-from zsrm.common.files import atomic_path
 
 EVAL_SEED = 1_000_000  # evaluation envs: seeds far from the training envs'
 

@@ -14,12 +14,12 @@ import numpy as np
 import torch
 from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
-from zsrm.rl.config import TrainConfig
-from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor
 from zsrm.common.checkpoints import check_optimizer, load_optimizer, read_checkpoint_state
 from zsrm.common.checkpoints import save_checkpoint as save_checkpoint_folder
 from zsrm.common.registry import WEIGHTS_FILE, build_model, load_weights, read_config, save_folder
 from zsrm.common.registry import save_weights as save_module_weights
+from zsrm.rl.config import TrainConfig
+from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor
 
 KIND = "zsrm-policy"
 

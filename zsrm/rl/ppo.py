@@ -23,17 +23,17 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 
+from zsrm.common.files import atomic_path, read_json, write_json
 from zsrm.rewards import VecZeroShotReward
 from zsrm.rl.auxiliary import InverseDynamicsAux
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.curiosity import ICMUpdate, VecCuriosity
 from zsrm.rl.envs import make_reward, make_vec
-from zsrm.rl.goals import goal_camera, task_entry
 from zsrm.rl.evaluate import Evaluator, evaluate, random_actions
 from zsrm.rl.features import policy_view
+from zsrm.rl.goals import goal_camera, task_entry
 from zsrm.rl.policy import PolicyBundle, load_checkpoint, policy_kwargs, save_checkpoint
 from zsrm.vlm import load_vlm
-from zsrm.common.files import atomic_path, read_json, write_json
 
 EVAL_FIELDS = ("env_steps", "mean", "se", "success_rate", "train_reward", "wall_s")
 FINAL_EPISODES = 30

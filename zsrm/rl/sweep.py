@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
+from zsrm.common.files import write_text
 from zsrm.rl.config import TrainConfig, takes_reward
 from zsrm.rl.evaluate import mean_se
-from zsrm.common.files import write_text
 
 
 def trial_name(task: str, reward: str, seed: int) -> str:

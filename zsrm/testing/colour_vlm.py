@@ -19,9 +19,9 @@ import numpy as np
 import torch
 from torch import nn
 
+from zsrm.common.registry import save_folder
 from zsrm.tasks.language import COLOURS
 from zsrm.vlm.base import VisionLanguageModel, pixels_from_images
-from zsrm.common.registry import save_folder
 
 # Linear colour detectors on RGB in [0, 1] (rows: red, green, yellow, blue) and biases: each
 # is positive on its block colour and negative on the others, the table, floor and walls.

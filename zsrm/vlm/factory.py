@@ -22,8 +22,8 @@ from pathlib import Path
 
 import torch
 
-from zsrm.vlm.base import VisionLanguageModel
 from zsrm.common.registry import SHIPPED, WEIGHTS_FILE, load_folder
+from zsrm.vlm.base import VisionLanguageModel
 
 DEFAULT_VLM = "scene"  # the VLM every stage uses unless told otherwise
 DEFAULT_OPEN_CLIP_MODEL = "RN50"

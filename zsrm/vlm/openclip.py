@@ -26,9 +26,9 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from zsrm.vlm.base import ImageBatch, VisionLanguageModel, pixels_from_images
 from zsrm.common.registry import WEIGHTS_FILE, build_model, read_config, register_kind, save_folder
 from zsrm.common.registry import load_weights as load_folder_weights
+from zsrm.vlm.base import ImageBatch, VisionLanguageModel, pixels_from_images
 
 CHECKPOINT_SUFFIXES = (".safetensors", ".pt", ".pth", ".bin")
 HF_SAFE_WEIGHTS = "open_clip_model.safetensors"

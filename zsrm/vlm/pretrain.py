@@ -41,14 +41,14 @@ import numpy as np
 import torch
 from torch import nn
 
-from zsrm.tasks.language import COLOURS
-from zsrm.tasks.catalogue import SCENE_SHAPES
-from zsrm.tasks.pendulum import POSES, all_pendulum_captions, mirrored, pendulum_caption
-from zsrm.common.files import atomic_path
-from zsrm.vlm.losses import multi_positive_contrastive_loss
 from zsrm.common.checkpoints import adamw, load_optimizer, read_checkpoint_state, save_checkpoint, warmup_cosine
-from zsrm.vlm.presence import all_box_captions, all_presence_captions, box_visible, presence_caption, visible_colours
+from zsrm.common.files import atomic_path
 from zsrm.common.registry import read_config
+from zsrm.tasks.catalogue import SCENE_SHAPES
+from zsrm.tasks.language import COLOURS
+from zsrm.tasks.pendulum import POSES, all_pendulum_captions, mirrored, pendulum_caption
+from zsrm.vlm.losses import multi_positive_contrastive_loss
+from zsrm.vlm.presence import all_box_captions, all_presence_captions, box_visible, presence_caption, visible_colours
 from zsrm.vlm.scene import SCENE_PRESETS, SHIPPED_SCENE_DIR, SceneConfig, SceneFolder, SceneVLM, create_scene_vlm
 
 SHAPES = list(SCENE_SHAPES.values())  # a render's "shape" index -> the shape its captions name

@@ -27,9 +27,9 @@ import numpy as np  # noqa: F401  (doctest)
 import torch
 from torch import nn
 
-from zsrm.vlm.base import ImageBatch, VisionLanguageModel, check_image_tower, pixels_from_images
 from zsrm.common.registry import (WEIGHTS_FILE, build_model, load_weights, read_config, register_kind, register_shipped,
-                               save_folder)
+                                  save_folder)
+from zsrm.vlm.base import ImageBatch, VisionLanguageModel, check_image_tower, pixels_from_images
 from zsrm.vlm.text_cache import TextEmbeddingCache
 
 # The pretrained scene VLM shipped with zsrm (built by `zsrm pretrain-vlm`), spec "scene".
