@@ -108,6 +108,8 @@ results: setup
 		--data data/multitask/rollouts-choice --out runs/multitask/distill-choice
 	$(VENV)/bin/zsrm eval-multitask --threads 1 --policies runs/multitask/distill-choice \
 		--data data/multitask/rollouts-choice --seeds 50 --out results/multitask/table2_choice.json
+	# results/README.md and README.md's headline table, from the files above
+	$(VENV)/bin/zsrm results-page
 
 clean:
 	rm -rf reports .pytest_cache
