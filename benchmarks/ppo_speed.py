@@ -27,7 +27,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from zsrm.vlm.files import write_json  # noqa: E402
+from zsrm.common.files import write_json  # noqa: E402
 
 
 def train_steps_per_s(cfg) -> tuple[float, int]:

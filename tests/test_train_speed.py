@@ -208,9 +208,12 @@ def test_an_evaluator_kept_for_a_run_plays_the_episodes_of_a_fresh_evaluation():
 
     seen_fresh, seen_first, seen_again = [], [], []
     fresh = evaluate(recording(seen_fresh), cfg, 3, seed=1)
-    evaluator = Evaluator(cfg, 3, seed=1)
+    evaluator = Evaluator(cfg, 5, seed=1)  # built for 5 (the final evaluation), asked for the first 3
     try:
-        first, again = evaluator(recording(seen_first)), evaluator(recording(seen_again))
+        first, again = evaluator(recording(seen_first), 3), evaluator(recording(seen_again), 3)
+        assert len(evaluator(lambda obs: np.zeros((5, 3), np.float32))["episode_rewards"]) == 5
+        with pytest.raises(ValueError, match="1 to 5 episodes"):
+            evaluator(recording([]), 6)
     finally:
         evaluator.close()
     assert len(seen_fresh) == cfg.episode_decisions

@@ -96,7 +96,7 @@ class TrainConfig:
     # run made before they existed still matches its configuration.
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0}
     # What a file without the setting means, where that is not the default: a run made before the
-    # setting existed (read by from_dict and by zsrm.vlm.registry.parse_fields, e.g. a saved policy)
+    # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0}
 
     def __post_init__(self):

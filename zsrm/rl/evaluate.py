@@ -55,24 +55,42 @@ def evaluate(act, cfg: TrainConfig, episodes: int, seed: int, spread: str = "see
 
 
 class Evaluator:
-    """:func:`evaluate` on envs built once and reseeded before each call, so every call plays
-    the same seeded episodes as a fresh :func:`evaluate`. Training evaluates every
-    ``eval_every`` steps: building the scenes' renderers each time cost more than playing."""
+    """:func:`evaluate` on envs built once (at the first call) and reseeded before each call, so
+    every call plays the same seeded episodes as a fresh :func:`evaluate`. A call may ask for
+    fewer episodes than the envs built: it plays the first ones (seeded as make_vec seeds them).
+    Training evaluates every ``eval_every`` steps and at the end: building the scenes' renderers
+    each time cost more than playing."""
 
     def __init__(self, cfg: TrainConfig, episodes: int, seed: int, spread: str = "seen", wrap=None):
-        self.cfg, self.seed = cfg, eval_seed(seed)
-        self.venv = make_vec(cfg, episodes, self.seed, spread)
-        if wrap is not None:
-            self.venv = wrap(self.venv)
+        self.cfg, self.episodes, self.seed, self.spread, self.wrap = cfg, episodes, eval_seed(seed), spread, wrap
+        self.views: dict[int, object] = {}  # episodes -> the (wrapped) VecEnv of the first that many envs
 
-    def __call__(self, act) -> dict:
-        self.venv.seed(self.seed)  # the next reset seeds every env as make_vec did
-        out = run_vec_episodes(self.venv, act, key="oracle_reward" if is_pendulum(self.cfg.goal) else "oracle_steps")
+    def venv(self, episodes: int):
+        if episodes not in self.views:
+            if not 1 <= episodes <= self.episodes:
+                raise ValueError(f"this evaluator plays 1 to {self.episodes} episodes, not {episodes}")
+            if self.episodes not in self.views:
+                full = make_vec(self.cfg, self.episodes, self.seed, self.spread)
+                self.views[self.episodes] = self.wrap(full) if self.wrap else full
+            if episodes != self.episodes:
+                from stable_baselines3.common.vec_env import DummyVecEnv
+
+                envs = self.views[self.episodes].unwrapped.envs[:episodes]
+                first = DummyVecEnv([lambda env=env: env for env in envs])
+                self.views[episodes] = self.wrap(first) if self.wrap else first
+        return self.views[episodes]
+
+    def __call__(self, act, episodes: int | None = None) -> dict:
+        venv = self.venv(episodes or self.episodes)
+        venv.seed(self.seed)  # the next reset seeds every env as make_vec did
+        out = run_vec_episodes(venv, act, key="oracle_reward" if is_pendulum(self.cfg.goal) else "oracle_steps")
         mean, se = mean_se(out["episode_rewards"])
         return {"mean": mean, "se": se, "success_rate": float(np.mean(out["successes"])), **out}
 
     def close(self) -> None:
-        self.venv.close()
+        if self.episodes in self.views:  # the first-n views share its envs
+            self.views[self.episodes].close()
+        self.views = {}
 
 
 def random_actions(action_space, seed: int) -> Callable[[dict], np.ndarray]:

@@ -49,16 +49,15 @@ class EvalAndCheckpoint(BaseCallback):
     """Every ``eval_every`` env steps: the oracle metric on the eval envs (CSV + TensorBoard); at
     the first rollout's end past each ``checkpoint_every``: a checkpoint. Also drives the progress bar."""
 
-    def __init__(self, cfg: TrainConfig, out: Path, vlm, rows: list[dict], progress, on_eval=None,
+    def __init__(self, cfg: TrainConfig, out: Path, evaluator: Evaluator, rows: list[dict], progress, on_eval=None,
                  extra_modules: dict | None = None):
         super().__init__()
-        self.cfg, self.out, self.vlm, self.rows, self.progress = cfg, out, vlm, rows, progress
+        self.cfg, self.out, self.evaluator, self.rows, self.progress = cfg, out, evaluator, rows, progress
         self.on_eval, self.extra_modules = on_eval, extra_modules
         self.next_eval = (rows[-1]["env_steps"] if rows else 0) + cfg.eval_every
         self.next_ckpt = self.next_eval - cfg.eval_every + cfg.checkpoint_every
         self.rewards: list[float] = []
         self.t0 = time.time() - (rows[-1]["wall_s"] if rows else 0.0)
-        self.evaluator = None  # built at the first evaluation, kept for the run
 
     def env_steps(self) -> int:
         return int(self.num_timesteps * self.cfg.action_repeat)
@@ -79,16 +78,9 @@ class EvalAndCheckpoint(BaseCallback):
             while self.next_ckpt <= self.env_steps():
                 self.next_ckpt += self.cfg.checkpoint_every
 
-    def _on_training_end(self) -> None:
-        if self.evaluator is not None:
-            self.evaluator.close()
-            self.evaluator = None
-
     def evaluate(self):
         cfg = self.cfg
-        if self.evaluator is None:
-            self.evaluator = Evaluator(cfg, cfg.eval_episodes, cfg.seed, wrap=lambda v: policy_view(v, self.vlm, cfg))
-        result = self.evaluator(policy_act(self.model, cfg.eval_deterministic))
+        result = self.evaluator(policy_act(self.model, cfg.eval_deterministic), cfg.eval_episodes)
         # Mean reward per decision over the interval, times the decisions of an episode.
         train_reward = float(np.mean(self.rewards) * self.cfg.episode_decisions) if self.rewards else 0.0
         self.rewards = []
@@ -160,14 +152,16 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     # PPO stops only at a rollout's end: train whole rollouts, never past cfg.steps.
     rollout = cfg.n_envs * cfg.n_steps * cfg.action_repeat
     remaining = max(0, max(rollout, cfg.steps // rollout * rollout) - done_steps) // rollout * rollout
+    # one set of eval envs for the run: each evaluation plays the first eval_episodes, the final all
+    evaluator = Evaluator(cfg, max(FINAL_EPISODES, cfg.eval_episodes), cfg.seed, wrap=lambda v: policy_view(v, vlm, cfg))
     with tqdm(total=cfg.steps, initial=done_steps, unit="step", desc=f"train {cfg.reward} {cfg.goal}",
               disable=not progress, smoothing=0.05) as bar:
-        callback = EvalAndCheckpoint(cfg, out, vlm, rows, bar, on_eval, extra_modules)
+        callback = EvalAndCheckpoint(cfg, out, evaluator, rows, bar, on_eval, extra_modules)
         if remaining:
             model.learn(remaining // cfg.action_repeat, callback=[*extra_callbacks, callback],
                         reset_num_timesteps=state is None)
-        final = evaluate(policy_act(model, cfg.eval_deterministic), cfg, FINAL_EPISODES, cfg.seed,
-                         wrap=lambda v: policy_view(v, vlm, cfg))
+        final = evaluator(policy_act(model, cfg.eval_deterministic), FINAL_EPISODES)
+    evaluator.close()
     venv.close()
     PolicyBundle(model.policy, cfg).save(out / "policy")
     save_checkpoint(out / "checkpoint", model, cfg, callback.env_steps(), rows, extra_modules)
