@@ -209,6 +209,7 @@ def writer_commands(tmp_path, out, dataset) -> dict[str, list[str]]:
         "distill": ["distill", "--out", str(out)],
         "eval-multitask": ["eval-multitask", "--out", str(out / "table2.json")],
         "eval-goals": ["eval-goals", "--out", str(out / "goals.json")],
+        "results-page": ["results-page", "--results", str(out), "--readme", str(out / "README.md")],
     }
 
 
@@ -222,7 +223,7 @@ def test_every_writing_command_is_listed():
                                      "finetune", "eval-grounding", "reward-data", "pretrain-vlm", "eval-vlm",
                                      "eval-pose", "demo", "train", "rollout", "sweep", "plot", "reproduce",
                                      "multitask-policies", "multitask-rollouts", "distill", "eval-multitask",
-                                     "eval-goals"])
+                                     "eval-goals", "results-page"])
 def test_an_unwritable_output_is_one_line_before_any_work(command, dataset, tmp_path, capsys, monkeypatch):
     def no_work(*args, **kwargs):
         raise AssertionError("work started before the output was checked")

@@ -192,9 +192,6 @@ def test_the_circle_finder_finds_a_circle(tmp_path):
 
 # The shared helpers live in zsrm.common; zsrm.vlm is about vision-language models only.
 SHARED_MODULES = {"files", "registry", "optim", "checkpoints"}
-# Files owned by issue 37 (training speed) that still import zsrm.vlm.files, an alias kept for them;
-# remove each entry when its import line moves to zsrm.common.files.
-PENDING_SHARED_IMPORTS = {"benchmarks/ppo_speed.py", "benchmarks/train_profile.py"}
 
 
 def _shared_names() -> set[str]:
@@ -209,27 +206,28 @@ def _shared_names() -> set[str]:
     return names
 
 
-def _shared_from_vlm() -> dict[str, list[str]]:
-    """file -> imports of the shared helpers through zsrm.vlm, in every Python file outside zsrm/vlm/."""
-    shared, out = SHARED_MODULES | _shared_names(), defaultdict(list)
-    for path in sorted(ROOT.glob("*/**/*.py")):
+def _shared_from_vlm() -> list[str]:
+    """Imports of the shared helpers through zsrm.vlm, in the repo's Python files outside zsrm/vlm/."""
+    shared, out = SHARED_MODULES | _shared_names(), []
+    paths = [p for top in ("zsrm", "tests", "benchmarks", "probes", "tools") for p in (ROOT / top).rglob("*.py")]
+    for path in sorted(paths):
         rel = path.relative_to(ROOT)
-        if rel.parts[0].startswith(".") or rel.parts[0] in ("runs", "build") or "zsrm.egg-info" in rel.parts \
-                or (PACKAGE / "vlm") in path.parents or "__pycache__" in rel.parts:
+        if (PACKAGE / "vlm") in path.parents:
             continue
         for line, name in _imported_modules(path):
             parts = name.split(".")
             if parts[:2] == ["zsrm", "vlm"] and shared & set(parts[2:]):
-                out[str(rel)].append(f"{rel}:{line}: {name}")
+                out.append(f"{rel}:{line}: {name}")
     return out
 
 
 def test_shared_helpers_are_not_imported_from_the_vlm_package():
-    found = _shared_from_vlm()
-    bad = [hit for file, hits in found.items() if file not in PENDING_SHARED_IMPORTS for hit in hits]
+    bad = _shared_from_vlm()
     assert not bad, "import these from zsrm.common, not zsrm.vlm:\n" + "\n".join(bad)
-    stale = sorted(PENDING_SHARED_IMPORTS - set(found))
-    assert not stale, f"no longer import from zsrm.vlm, drop them from PENDING_SHARED_IMPORTS: {stale}"
+
+
+def test_the_vlm_package_holds_none_of_the_shared_modules():
+    assert not [m for m in SHARED_MODULES if (PACKAGE / "vlm" / f"{m}.py").exists()]
 
 
 def test_the_common_package_imports_nothing_else_of_zsrm():

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from zsrm.common.files import write_text
+from zsrm.common.files import check_writable, write_text
 
 PAGE = "results/README.md"
 HEADLINE_START = "<!-- headline: written by `zsrm results-page` from results/; do not edit by hand -->"
@@ -284,6 +284,9 @@ class ResultsPage:
 
     def run(self) -> int:
         results = Path(self.results)
+        if not self.check:
+            for path in [results / "README.md", *([Path(self.readme)] if self.readme else [])]:
+                check_writable(path)
         wanted = {results / "README.md": page(results)}
         if self.readme:
             wanted[Path(self.readme)] = readme_with_headline(Path(self.readme).read_text(), results)
