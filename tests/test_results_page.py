@@ -1,8 +1,10 @@
 """results/README.md and README.md's headline table are what `zsrm results-page` writes from the result files."""
+import doctest
 import json
 import shutil
 from pathlib import Path
 
+from zsrm.pipeline import results_page
 from zsrm.pipeline.results_page import FIGURES, OTHER, SIDE, ResultsPage, headline, page, readme_with_headline, unlisted
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,3 +61,8 @@ def _matches(file: str, pattern: str) -> bool:
     import fnmatch
 
     return fnmatch.fnmatch(file, pattern.replace("**", "*"))
+
+
+def test_docstring_examples():
+    result = doctest.testmod(results_page)
+    assert result.attempted > 0 and result.failed == 0

@@ -21,7 +21,6 @@ from typing import Callable
 
 from zsrm.common.files import check_writable, write_text
 
-PAGE = "results/README.md"
 HEADLINE_START = "<!-- headline: written by `zsrm results-page` from results/; do not edit by hand -->"
 HEADLINE_END = "<!-- end of headline -->"
 
