@@ -37,24 +37,47 @@ def test_a_finished_run_is_not_trained_again(tmp_path):
     assert (tmp_path / "summary.json").stat().st_mtime_ns == mtime
 
 
-def test_killed_run_resumes_to_the_same_step_count(tmp_path):
-    cfg = dict(goal="place_right", reward="oracle", steps=768, eval_every=128, checkpoint_every=128, **TINY)
+def eval_rows(path):
+    """eval.csv's rows, wall time aside."""
+    import csv
+
+    return [{k: v for k, v in row.items() if k != "wall_s"} for row in csv.DictReader(path.open())]
+
+
+def same_weights(a, b) -> bool:
+    from safetensors.numpy import load_file
+
+    wa, wb = load_file(str(a)), load_file(str(b))
+    return wa.keys() == wb.keys() and all(np.array_equal(wa[k], wb[k]) for k in wa)
+
+
+@pytest.mark.parametrize("reward", ["oracle", "curiosity"])
+def test_killed_run_resumes_to_the_same_run(tmp_path, reward):
+    """Killed (SIGKILL) after its first checkpoint and resumed: the same eval.csv rows, final
+    evaluation and policy weights as an unbroken run (issue 41, must-show 0)."""
+    cfg = dict(goal="place_right", reward=reward, seed=3, steps=768, eval_every=128, checkpoint_every=256, **TINY)
+    whole = train(TrainConfig(**cfg), tmp_path / "whole", progress=False)
+
+    cut = tmp_path / "cut"
     code = ("import json, sys; from zsrm.rl import TrainConfig, train; "
-            f"train(TrainConfig(**json.loads(sys.argv[1])), {str(tmp_path)!r}, progress=False)")
+            f"train(TrainConfig(**json.loads(sys.argv[1])), {str(cut)!r}, progress=False)")
     proc = subprocess.Popen([sys.executable, "-c", code, json.dumps(cfg)], env={**os.environ, "OMP_NUM_THREADS": "1"})
-    state = tmp_path / "checkpoint" / "state.json"
+    state = cut / "checkpoint" / "state.json"
     deadline = time.time() + 300
     while not state.is_file() and proc.poll() is None and time.time() < deadline:
-        time.sleep(0.2)
+        time.sleep(0.05)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    assert state.is_file() and not (tmp_path / "summary.json").exists()
+    assert state.is_file() and not (cut / "summary.json").exists()
     killed_at = json.loads(state.read_text())["env_steps"]
     assert 0 < killed_at < 768
-    summary = train(TrainConfig(**cfg), tmp_path, progress=False)
-    assert summary["env_steps"] == 768
-    steps = [row["env_steps"] for row in summary["curve"]]
-    assert steps == sorted(set(steps)) and steps[-1] == 768  # the curve continues, no step twice
+    resumed = train(TrainConfig(**cfg), cut, progress=False)
+
+    assert resumed["env_steps"] == 768
+    assert eval_rows(cut / "eval.csv") == eval_rows(tmp_path / "whole" / "eval.csv")
+    assert [row["env_steps"] for row in eval_rows(cut / "eval.csv")] == ["128", "256", "384", "512", "640", "768"]
+    assert resumed["final_episode_rewards"] == whole["final_episode_rewards"]
+    assert same_weights(cut / "policy" / "model.safetensors", tmp_path / "whole" / "policy" / "model.safetensors")
 
 
 def test_resume_refuses_other_settings(tmp_path):

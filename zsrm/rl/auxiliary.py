@@ -56,10 +56,26 @@ class InverseDynamicsAux(BaseCallback):
     def _on_step(self) -> bool:
         return True
 
+    def make_optimizer(self) -> torch.optim.Adam:
+        if self.optimizer is None:
+            extractor = self.model.policy.features_extractor
+            self.optimizer = torch.optim.Adam([*extractor.parameters(), *self.model_inverse.parameters()], lr=self.lr)
+        return self.optimizer
+
+    def resume_state(self):
+        """What exact resume keeps (:mod:`zsrm.rl.resume`): the minibatch order's generator and
+        the optimiser (the head's weights are saved with the checkpoint's modules)."""
+        return {"rng": self.rng.bit_generator.state}, {}, ({} if self.optimizer is None else {"inverse": self.optimizer})
+
+    def load_resume_state(self, info: dict, arrays: dict) -> dict:
+        from zsrm.rl.resume import generator_from
+
+        self.rng = generator_from(info["rng"])
+        return {"inverse": self.make_optimizer()}
+
     def _on_rollout_end(self) -> None:
         extractor = self.model.policy.features_extractor
-        if self.optimizer is None:
-            self.optimizer = torch.optim.Adam([*extractor.parameters(), *self.model_inverse.parameters()], lr=self.lr)
+        self.make_optimizer()
         buffer = self.model.rollout_buffer
         n_steps, n_envs = buffer.episode_starts.shape
         continues = torch.as_tensor(buffer.episode_starts[1:] == 0, device=self.device)  # t -> t + 1 in one episode

@@ -91,6 +91,27 @@ class VecCuriosity(VecEnvWrapper):
             self._m2 += delta * (v - self._mean)
         return float(np.sqrt(self._m2 / self._count)) + 1e-8 if self._count > 1 else 1.0
 
+    def resume_state(self):
+        """What exact resume keeps (:mod:`zsrm.rl.resume`), saved between rollouts (when no
+        transitions wait): the reward scale, the last frames and the optimiser (ICM's weights
+        are saved with the checkpoint's modules)."""
+        if self.transitions:
+            raise RuntimeError("ICM's state is saved between rollouts, after its update")
+        # the running sums keep their type (a float32 sum stays float32, a Python float a float)
+        kinds = {k: "float" if isinstance(getattr(self, k), float) else np.asarray(getattr(self, k)).dtype.name
+                 for k in ("_mean", "_m2")}
+        return ({"count": self._count, "kinds": kinds}, {"obs": self._obs, "mean": np.asarray([self._mean]),
+                                                          "m2": np.asarray([self._m2])}, {"icm": self.optimizer})
+
+    def load_resume_state(self, info: dict, arrays: dict) -> dict:
+        self._count = int(info["count"])
+        for key, name in (("mean", "_mean"), ("m2", "_m2")):
+            kind = info["kinds"][name]
+            value = arrays[key].astype(np.float64 if kind == "float" else kind)[0]
+            setattr(self, name, float(value) if kind == "float" else value)
+        self._obs = arrays["obs"]
+        return {"icm": self.optimizer}
+
     def update(self, epochs: int = 2, batch_size: int = 128) -> dict:
         """Train ICM on the kept transitions (then drop them); returns the mean losses."""
         if not self.transitions:

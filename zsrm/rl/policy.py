@@ -20,6 +20,7 @@ from zsrm.common.registry import WEIGHTS_FILE, build_model, load_weights, read_c
 from zsrm.common.registry import save_weights as save_module_weights
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor
+from zsrm.rl.resume import read_resume
 
 KIND = "zsrm-policy"
 
@@ -75,26 +76,32 @@ class PolicyBundle:
 
 
 def save_checkpoint(folder: Path, model, cfg: TrainConfig, env_steps: int, rows: list[dict],
-                    extra: dict | None = None) -> None:
+                    extra: dict | None = None, write_more=None) -> None:
     """Policy weights, optimiser and the step count, swapped in atomically; ``extra`` maps file
-    names to more modules to keep (the curiosity baseline's ICM)."""
+    names to more modules to keep (the curiosity baseline's ICM); ``write_more(folder)`` writes
+    more files into it (the run's state for exact resume, :class:`zsrm.rl.resume.RunState`)."""
     state = {"config": cfg.identity(), "env_steps": int(env_steps), "rows": rows}
 
     def save_weights(tmp):
         PolicyBundle(model.policy, cfg).save(tmp)
         for file, module in (extra or {}).items():
             save_module_weights(module, tmp, file)
+        if write_more is not None:
+            write_more(tmp)
 
     save_checkpoint_folder(folder, save_weights, model.policy.optimizer, state)
 
 
 def load_checkpoint(folder: Path, cfg: TrainConfig) -> dict | None:
-    """The checkpoint's state plus ``restore(model)``, or None when there is none."""
+    """The checkpoint's state plus ``restore(model)`` and ``resume`` (the run's state for exact
+    resume, :func:`zsrm.rl.resume.read_resume`; None in a checkpoint written before it), or None
+    when there is none."""
     if not (folder / "state.json").is_file():
         return None
     state = read_checkpoint_state(folder, cfg.identity(), {"env_steps": int, "rows": list})
     bundle = PolicyBundle.load(folder)
     check_optimizer(folder, bundle.policy.optimizer)  # before any work: a bad file is one line now
+    state["resume"] = read_resume(folder)
 
     def restore(model, extra: dict | None = None):
         model.policy.load_state_dict(bundle.policy.state_dict())

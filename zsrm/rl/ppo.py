@@ -5,7 +5,8 @@ One run writes to its folder::
     config.json     the TrainConfig
     eval.csv        env step, oracle episode reward (mean, s.e.), success rate, train reward
     tb/             TensorBoard logs of the same and of PPO's losses
-    checkpoint/     policy + optimiser + step: a killed run resumes here with the same step count
+    checkpoint/     policy + optimiser + step + the run's state (zsrm.rl.resume): a killed run
+                    resumes here to the same eval.csv rows and final weights as an unbroken run
     policy/         the trained policy (safetensors + JSON), for ``zsrm rollout``
     summary.json    the final evaluation
 
@@ -33,6 +34,7 @@ from zsrm.rl.evaluate import Evaluator, evaluate, random_actions
 from zsrm.rl.features import policy_view
 from zsrm.rl.goals import goal_camera, task_entry
 from zsrm.rl.policy import PolicyBundle, load_checkpoint, policy_kwargs, save_checkpoint
+from zsrm.rl.resume import RunState
 from zsrm.vlm import load_vlm
 
 EVAL_FIELDS = ("env_steps", "mean", "se", "success_rate", "train_reward", "wall_s")
@@ -46,8 +48,9 @@ def build_ppo(cfg: TrainConfig, venv, device: str = "cpu") -> PPO:
 
 
 class EvalAndCheckpoint(BaseCallback):
-    """Every ``eval_every`` env steps: the oracle metric on the eval envs (CSV + TensorBoard); at
-    the first rollout's end past each ``checkpoint_every``: a checkpoint. Also drives the progress bar."""
+    """Every ``eval_every`` env steps: the oracle metric on the eval envs (CSV + TensorBoard); after
+    the PPO update of the first rollout past each ``checkpoint_every`` (when the next rollout
+    starts): a checkpoint. Also drives the progress bar."""
 
     def __init__(self, cfg: TrainConfig, out: Path, evaluator: Evaluator, rows: list[dict], progress, on_eval=None,
                  extra_modules: dict | None = None):
@@ -58,9 +61,22 @@ class EvalAndCheckpoint(BaseCallback):
         self.next_ckpt = self.next_eval - cfg.eval_every + cfg.checkpoint_every
         self.rewards: list[float] = []
         self.t0 = time.time() - (rows[-1]["wall_s"] if rows else 0.0)
+        self.run_state = None  # a zsrm.rl.resume.RunState: the checkpoints keep it
+
+    def resume_state(self):
+        return {"next_eval": self.next_eval, "next_ckpt": self.next_ckpt, "rewards": self.rewards}, {}, {}
+
+    def load_resume_state(self, info: dict, arrays: dict) -> dict:
+        self.next_eval, self.next_ckpt, self.rewards = int(info["next_eval"]), int(info["next_ckpt"]), list(info["rewards"])
+        return {}
+
+    def save(self) -> None:
+        write = self.run_state.save if self.run_state is not None and self.run_state.ready() else None
+        save_checkpoint(self.out / "checkpoint", self.model, self.cfg, self.env_steps(), self.rows,
+                        self.extra_modules, write)
 
     def env_steps(self) -> int:
-        return int(self.num_timesteps * self.cfg.action_repeat)
+        return int(self.model.num_timesteps * self.cfg.action_repeat)
 
     def _on_step(self) -> bool:
         self.rewards.append(float(np.mean(self.locals["rewards"])))
@@ -70,13 +86,13 @@ class EvalAndCheckpoint(BaseCallback):
             self.next_eval += self.cfg.eval_every
         return True
 
-    def _on_rollout_end(self) -> None:
-        # only at a rollout's end: a run resumes on whole rollouts, so it ends at the same step count
+    def _on_rollout_start(self) -> None:
+        # Between rollouts, after the last one's PPO update (SB3 calls on_rollout_end before it):
+        # a run resumes on whole rollouts with nothing of a rollout lost or done twice.
         if self.env_steps() >= self.next_ckpt:
-            save_checkpoint(self.out / "checkpoint", self.model, self.cfg, self.env_steps(), self.rows,
-                            self.extra_modules)
             while self.next_ckpt <= self.env_steps():
                 self.next_ckpt += self.cfg.checkpoint_every
+            self.save()
 
     def evaluate(self):
         cfg = self.cfg
@@ -140,6 +156,7 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     venv, extra_callbacks, extra_modules = rewarded_env(cfg, out, done_steps)
     venv = policy_view(venv, vlm, cfg)
     model = build_ppo(cfg, venv, device)
+    aux = None
     if cfg.aux_inverse:
         points_dim = model.policy.features_extractor.out[0].in_features
         aux = InverseDynamicsAux(points_dim, venv.action_space.shape[0], seed=cfg.seed, device=device)
@@ -157,14 +174,17 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     with tqdm(total=cfg.steps, initial=done_steps, unit="step", desc=f"train {cfg.reward} {cfg.goal}",
               disable=not progress, smoothing=0.05) as bar:
         callback = EvalAndCheckpoint(cfg, out, evaluator, rows, bar, on_eval, extra_modules)
+        callback.run_state = RunState(model, {"train": callback, **({"inverse": aux} if aux is not None else {})})
+        if state is not None and state["resume"] is not None:
+            callback.run_state.restore(state["resume"])  # last before learn: it sets the random generators
         if remaining:
             model.learn(remaining // cfg.action_repeat, callback=[*extra_callbacks, callback],
                         reset_num_timesteps=state is None)
+        callback.save()  # before the final evaluation, which a resume from here plays again
         final = evaluator(policy_act(model, cfg.eval_deterministic), FINAL_EPISODES)
     evaluator.close()
     venv.close()
     PolicyBundle(model.policy, cfg).save(out / "policy")
-    save_checkpoint(out / "checkpoint", model, cfg, callback.env_steps(), rows, extra_modules)
     return write_summary(cfg, out, final, rows, callback.env_steps(), wall_s=time.time() - callback.t0)
 
 
