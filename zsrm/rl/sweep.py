@@ -6,7 +6,13 @@ Each trial is one :func:`~zsrm.rl.ppo.train` run in its own folder
 * a finished trial (its ``summary.json`` made with the same settings) is skipped;
 * a killed trial resumes from its last checkpoint with the same step count;
 * trials run in parallel on a local Ray (``ray.init(num_cpus=N)``) or spread over a cluster
-  (``address="auto"`` or ``ray://HOST:PORT``); on a cluster ROOT must be shared storage.
+  (``address`` HOST:PORT as ``ray start --head`` prints it, ``ray://HOST:PORT`` or ``auto``); on
+  a cluster ROOT must be shared storage, and before any trial starts every node is asked
+  whether it imports zsrm and writes ROOT and sees what this machine wrote there (one line
+  naming the node when not, :func:`check_nodes`);
+* a trial whose node dies is run again on another node (Ray Tune's ``max_failures``) and
+  resumes from its last checkpoint; each start of a trial is a line of its folder's
+  ``attempts.jsonl`` (node, host, the env steps it started from).
 
 :func:`gather` then reads the runs' summaries into one: per task and reward the mean and
 standard error over seeds of each run's final oracle episode reward, and the curves.
@@ -20,8 +26,12 @@ standard error over seeds of each run's final oracle episode reward, and the cur
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
+import socket
+import time
+import uuid
 from pathlib import Path
 
 import numpy as np
@@ -76,8 +86,10 @@ def run_trial(trial: dict) -> dict:
     from zsrm.rl.ppo import train
 
     torch.set_num_threads(1)
-    os.chdir(trial["cwd"])  # Ray Tune runs a trial in a folder of its own: relative paths are the sweep's
+    if os.path.isdir(trial["cwd"]):  # Ray Tune runs a trial in a folder of its own: relative paths are the sweep's
+        os.chdir(trial["cwd"])
     cfg = TrainConfig.from_dict(trial["config"])
+    record_attempt(Path(trial["root"]) / trial["name"])
     summary = train(cfg, Path(trial["root"]) / trial["name"], progress=False,
                     on_eval=lambda row: tune.report({**row, "final": 0}))
     result = {"env_steps": summary["env_steps"], "mean": summary["final_mean"], "final": 1}
@@ -85,12 +97,33 @@ def run_trial(trial: dict) -> dict:
     return result
 
 
+def record_attempt(folder: Path) -> dict:
+    """Append this start of a trial to ``folder/attempts.jsonl``: the Ray node and host it runs
+    on, its process and the env steps its checkpoint starts it from."""
+    import ray
+
+    from zsrm.common.files import ZsrmFileError, read_json
+
+    state = folder / "checkpoint" / "state.json"
+    try:
+        start = int(read_json(state, "a checkpoint's state")["env_steps"]) if state.is_file() else 0
+    except (ZsrmFileError, KeyError, TypeError, ValueError):
+        start = None  # train() will say what is wrong with it
+    line = {"node_id": ray.get_runtime_context().get_node_id(), "host": socket.gethostname(), "pid": os.getpid(),
+            "start_env_steps": start, "time": round(time.time(), 3)}
+    folder.mkdir(parents=True, exist_ok=True)
+    with (folder / "attempts.jsonl").open("a") as f:
+        f.write(json.dumps(line) + "\n")
+    return line
+
+
 def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | None = None, num_cpus: int = 2,
           address: str | None = None, cpus_per_trial: float = 1.0, kept: str | Path | None = None,
-          init_root: str | None = None) -> list[str]:
+          init_root: str | None = None, max_failures: int = 3) -> list[str]:
     """Run every unfinished trial of the grid on Ray Tune; returns the names that ran. A trial
     is finished when its run folder under ``root``, or its kept summary ``kept/<name>.json``
-    (see :func:`keep_trial_summaries`), holds a finished run with the same settings."""
+    (see :func:`keep_trial_summaries`), holds a finished run with the same settings. A trial
+    that fails (its node died) is started again up to ``max_failures`` times, from its checkpoint."""
     import ray
     from ray import tune
 
@@ -103,17 +136,111 @@ def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | None = None
         return []
     for t in todo:
         t["root"], t["cwd"] = str(root), os.getcwd()
-    start_ray(ray, num_cpus, address)
+    check_address(address)
     try:
+        start_ray(ray, num_cpus, address)
+    except Exception as err:  # Ray's own errors are several lines and types
+        if not address:
+            raise
+        raise ValueError(f"--address {address}: could not join the Ray cluster there "
+                         f"({str(err).strip().splitlines()[0][:200] if str(err).strip() else type(err).__name__})") from None
+    try:
+        if address:
+            nodes = check_nodes(ray, root)
+            num_cpus = ray.cluster_resources().get("CPU", num_cpus)
+            print(f"Ray cluster at {address}: {len(nodes)} nodes with CPUs ({num_cpus:g} CPUs), each imports zsrm "
+                  f"and writes {root}", flush=True)
         trainable = tune.with_resources(run_trial, {"cpu": cpus_per_trial})
         tuner = tune.Tuner(trainable, param_space=tune.grid_search(todo),
                            tune_config=tune.TuneConfig(max_concurrent_trials=max(1, int(num_cpus // cpus_per_trial))),
-                           run_config=tune.RunConfig(name="zsrm-sweep", storage_path=str(root / "_ray"),
-                                                     verbose=1))
+                           run_config=tune.RunConfig(name="zsrm-sweep", storage_path=str(root / "_ray"), verbose=1,
+                                                     failure_config=tune.FailureConfig(max_failures=max_failures)))
         tuner.fit()
     finally:
         ray.shutdown()
     return [t["name"] for t in todo]
+
+
+def check_address(address: str | None, timeout: float = 5.0) -> None:
+    """Fail now, with one line, when nothing answers at a HOST:PORT (or ray://HOST:PORT) address
+    (Ray itself would wait a minute, then print a page)."""
+    if not address or address == "auto":
+        return
+    host, _, port = address.split("://", 1)[-1].rpartition(":")
+    if not host or not port.isdigit():
+        raise ValueError(f"--address {address!r}: expected HOST:PORT (as `ray start --head` prints it), "
+                         "ray://HOST:PORT or auto")
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as err:
+        raise ValueError(f"--address {address}: no Ray cluster answers there ({err.strerror or err}); start one "
+                         "with `ray start --head` on its head node and pass the address it prints") from None
+
+
+def node_probe():
+    """The check :func:`check_nodes` runs on each node. Defined here, pickled by value (a nested
+    function): it must run on a node where zsrm does not import, to say so."""
+
+    def probe(root: str, mark: str, token: str) -> dict:
+        import os
+        import socket
+
+        out = {"host": socket.gethostname()}
+        try:
+            import zsrm  # noqa: F401
+        except Exception as err:
+            out["zsrm"] = f"{type(err).__name__}: {err}"
+        try:
+            with open(os.path.join(root, mark)) as f:
+                seen = f.read() == token
+        except OSError:
+            seen = False
+        if not seen:
+            out["shared"] = "it does not see the file this machine wrote there"
+        path = os.path.join(root, f"{mark}-{os.getpid()}-{socket.gethostname()}")
+        try:
+            with open(path, "w") as f:
+                f.write(token)
+            os.remove(path)
+        except OSError as err:
+            out["write"] = err.strerror or str(err)
+        return out
+
+    return probe
+
+
+def check_nodes(ray, root: Path, timeout: float = 180.0) -> list[dict]:
+    """Ask every alive node with CPUs, before any trial starts, whether it imports zsrm and can
+    write ``root`` and sees what this machine wrote there; a ValueError of one line naming each
+    node that cannot. Returns the nodes' answers."""
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    nodes = [n for n in ray.nodes() if n.get("Alive") and n.get("Resources", {}).get("CPU", 0) > 0]
+    token = uuid.uuid4().hex
+    mark = root / f".zsrm-node-check-{token[:12]}"
+    mark.write_text(token)
+    try:
+        probe = ray.remote(node_probe())
+        refs = [probe.options(num_cpus=0, max_retries=0, scheduling_strategy=NodeAffinitySchedulingStrategy(
+            n["NodeID"], soft=False)).remote(str(root), mark.name, token) for n in nodes]
+        answers = ray.get(refs, timeout=timeout)
+    finally:
+        mark.unlink(missing_ok=True)
+    problems = []
+    for node, answer in zip(nodes, answers):
+        where = f"node {node.get('NodeManagerAddress')} ({node['NodeID'][:8]}, host {answer['host']})"
+        if "zsrm" in answer:
+            problems.append(f"{where} cannot import zsrm ({answer['zsrm']}): install zsrm, the same version, "
+                            "on every node")
+        if "write" in answer:
+            problems.append(f"{where} cannot write the trial root {root} ({answer['write']}): --root must be "
+                            "storage every node sees and can write")
+        elif "shared" in answer:
+            problems.append(f"{where} does not share the trial root {root} with this machine ({answer['shared']}): "
+                            "--root must be the same shared folder on every node")
+    if problems:
+        raise ValueError("; ".join(problems))
+    return [{"node_id": n["NodeID"], **a} for n, a in zip(nodes, answers)]
 
 
 def start_ray(ray, num_cpus: int, address: str | None, tries: int = 3) -> None:
@@ -122,7 +249,8 @@ def start_ray(ray, num_cpus: int, address: str | None, tries: int = 3) -> None:
     for attempt in range(1, tries + 1):
         try:
             if address:
-                ray.init(address=address, ignore_reinit_error=True, log_to_driver=False)
+                # Ray's INFO lines on joining go: a bad setup is then one line (zsrm's own)
+                ray.init(address=address, ignore_reinit_error=True, log_to_driver=False, logging_level=logging.WARNING)
             else:
                 ray.init(num_cpus=num_cpus, include_dashboard=False, ignore_reinit_error=True, log_to_driver=False)
             return
