@@ -150,6 +150,11 @@ FIGURES = [
     Figure("Bad files and paths end in one clean line", "robustness.json",
            lambda d: f"{d['clean']} of {d['tried']} cases, {d['ran_code']} ran code from a file",
            "OMP_NUM_THREADS=1 python benchmarks/robustness.py --out results/robustness.json"),
+    Figure("A sweep on a Ray cluster, a worker node killed mid-trial", "cluster.json",
+           lambda d: f"{d['trials_finished']} of {d['trials_planned']} trials finished on {d['nodes']} nodes, "
+                     f"{d['trials_lost']} lost, the same figures as on one node: "
+                     f"{'yes' if d['identical_to_single_node'] else 'no'}",
+           "OMP_NUM_THREADS=1 python benchmarks/cluster.py --out results/cluster.json", headline=False),
     # speed
     Figure("Env steps/s, one / three 64 px cameras", "env_speed.json",
            lambda d: _slash((d["steps_per_s_1cam_64"], d["steps_per_s_3cam_64"]), "{:.0f}"),
