@@ -80,6 +80,29 @@ def test_killed_run_resumes_to_the_same_run(tmp_path, reward):
     assert same_weights(cut / "policy" / "model.safetensors", tmp_path / "whole" / "policy" / "model.safetensors")
 
 
+def test_a_damaged_run_state_is_one_line(tmp_path):
+    from zsrm.common.files import ZsrmFileError
+
+    cfg = TrainConfig(goal="push_close", reward="oracle", steps=256, eval_every=256, checkpoint_every=256, **TINY)
+    train(cfg, tmp_path, progress=False)
+    (tmp_path / "summary.json").unlink()
+    state = tmp_path / "checkpoint" / "resume.json"
+    good = state.read_text()
+    state.write_text("[1, 2]")
+    with pytest.raises(ZsrmFileError, match="resume.json"):
+        train(cfg, tmp_path, progress=False)
+    info = json.loads(good)
+    info["envs"] = info["envs"][:1]
+    state.write_text(json.dumps(info))
+    with pytest.raises(ZsrmFileError, match="training envs"):
+        train(cfg, tmp_path, progress=False)
+    info = json.loads(good)
+    del info["parts"]["train"]["info"]["next_eval"]
+    state.write_text(json.dumps(info))
+    with pytest.raises(ZsrmFileError, match="does not fit this run"):
+        train(cfg, tmp_path, progress=False)
+
+
 def test_resume_refuses_other_settings(tmp_path):
     cfg = TrainConfig(goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128, **TINY)
     train(cfg, tmp_path, progress=False)

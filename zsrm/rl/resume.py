@@ -117,7 +117,18 @@ class RunState:
 
     def restore(self, saved: dict) -> None:
         """Put back what :meth:`save` wrote (``saved``: :func:`read_resume`'s). Last thing before
-        ``learn``: it sets the random generators, which building the run's parts reseeded."""
+        ``learn``: it sets the random generators, which building the run's parts reseeded. A state
+        that does not fit this run is one ZsrmFileError."""
+        try:
+            self._restore(saved)
+        except ZsrmFileError:
+            raise
+        except (KeyError, IndexError, TypeError, ValueError, AttributeError, RuntimeError) as err:
+            first = str(err).strip().splitlines()[0][:200] if str(err).strip() else ""
+            raise ZsrmFileError(f"{saved['folder']}: the run's state ({RESUME_JSON}, {RESUME_TENSORS}) does not fit "
+                                f"this run ({type(err).__name__}: {first}); pass --fresh to start over") from None
+
+    def _restore(self, saved: dict) -> None:
         info, arrays, folder = saved["info"], saved["arrays"], saved["folder"]
         model = self.model
         if len(info["envs"]) != len(self.envs):
