@@ -220,3 +220,19 @@ def test_an_evaluator_kept_for_a_run_plays_the_episodes_of_a_fresh_evaluation():
     for result, seen in ((first, seen_first), (again, seen_again)):
         assert result["episode_rewards"] == fresh["episode_rewards"]
         assert np.array_equal(np.stack(seen), np.stack(seen_fresh))
+
+
+def test_target_kl_reaches_ppo_and_is_off_unless_set():
+    from zsrm.rl.ppo import build_ppo
+
+    assert "target_kl" not in TrainConfig().to_dict()  # off: runs made before it existed keep their config
+    cfg = TrainConfig(goal="stack", reward="oracle", target_kl=0.1, **TINY)
+    assert cfg.to_dict()["target_kl"] == 0.1
+    venv = policy_view(make_vec(cfg, cfg.n_envs, 0), ColourVLM(), cfg)
+    try:
+        assert build_ppo(cfg, venv).target_kl == 0.1
+        assert build_ppo(TrainConfig(goal="stack", reward="oracle", **TINY), venv).target_kl is None
+    finally:
+        venv.close()
+    with pytest.raises(ValueError, match="target_kl must be >= 0"):
+        TrainConfig(target_kl=-1.0)

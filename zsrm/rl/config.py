@@ -66,6 +66,9 @@ class TrainConfig:
     """entropy bonus"""
     clip_range: float = 0.2
     """PPO clip range"""
+    target_kl: float = 0.0
+    """stop an update's epochs at a minibatch whose KL from the rollout's policy passes 1.5x this
+    (0: never; stable-baselines3's target_kl)"""
     eval_every: int = 20_000
     """environment steps between evaluations"""
     eval_episodes: int = 10
@@ -94,7 +97,8 @@ class TrainConfig:
 
     # Settings added after runs were committed: written only when changed, so that a finished
     # run made before they existed still matches its configuration.
-    ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0}
+    ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0,
+             "target_kl": 0.0}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0}
@@ -108,6 +112,8 @@ class TrainConfig:
                      "eval_episodes", "checkpoint_every", "threads", "keypoints"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.target_kl < 0:
+            raise ValueError(f"target_kl must be >= 0 (0: no early stop), got {self.target_kl}")
         if self.start not in ("auto", "above", "around"):
             raise ValueError(f"unknown start {self.start!r}; choose auto, above or around")
         relation = goal_relation(self.goal)

@@ -44,7 +44,8 @@ FINAL_EPISODES = 30
 def build_ppo(cfg: TrainConfig, venv, device: str = "cpu") -> PPO:
     return PPO("MultiInputPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, ent_coef=cfg.ent_coef,
-               clip_range=cfg.clip_range, policy_kwargs=policy_kwargs(cfg), seed=cfg.seed, device=device, verbose=0)
+               clip_range=cfg.clip_range, target_kl=cfg.target_kl or None, policy_kwargs=policy_kwargs(cfg),
+               seed=cfg.seed, device=device, verbose=0)
 
 
 class EvalAndCheckpoint(BaseCallback):
