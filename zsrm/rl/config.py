@@ -69,6 +69,9 @@ class TrainConfig:
     target_kl: float = 0.0
     """stop an update's epochs at a minibatch whose KL from the rollout's policy passes 1.5x this
     (0: never; stable-baselines3's target_kl)"""
+    anneal_lr: bool = False
+    """decay the learning rate linearly to 0 over the run (CleanRL's anneal_lr): late updates take
+    small steps, so a policy that has learned does not collapse in its last rollouts"""
     eval_every: int = 20_000
     """environment steps between evaluations"""
     eval_episodes: int = 10
@@ -98,7 +101,7 @@ class TrainConfig:
     # Settings added after runs were committed: written only when changed, so that a finished
     # run made before they existed still matches its configuration.
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0,
-             "target_kl": 0.0}
+             "target_kl": 0.0, "anneal_lr": False}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0}

@@ -41,9 +41,28 @@ EVAL_FIELDS = ("env_steps", "mean", "se", "success_rate", "train_reward", "wall_
 FINAL_EPISODES = 30
 
 
+def learning_rate(cfg: TrainConfig):
+    """A constant, or (anneal_lr) stable-baselines3's schedule of the run's remaining fraction, which
+    it computes from the total env steps, so a resumed run continues the same decay."""
+    if not cfg.anneal_lr:
+        return cfg.learning_rate
+    return LinearDecay(cfg.learning_rate)
+
+
+class LinearDecay:
+    """``lr * progress_remaining``, 0 past the end (the last rollout may overshoot the run's steps);
+    a class, not a lambda, so that it pickles."""
+
+    def __init__(self, start: float):
+        self.start = start
+
+    def __call__(self, progress_remaining: float) -> float:
+        return self.start * max(progress_remaining, 0.0)
+
+
 def build_ppo(cfg: TrainConfig, venv, device: str = "cpu") -> PPO:
     return PPO("MultiInputPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
-               learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, ent_coef=cfg.ent_coef,
+               learning_rate=learning_rate(cfg), gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, ent_coef=cfg.ent_coef,
                clip_range=cfg.clip_range, target_kl=cfg.target_kl or None, policy_kwargs=policy_kwargs(cfg),
                seed=cfg.seed, device=device, verbose=0)
 
