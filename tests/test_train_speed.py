@@ -236,3 +236,37 @@ def test_target_kl_reaches_ppo_and_is_off_unless_set():
         venv.close()
     with pytest.raises(ValueError, match="target_kl must be >= 0"):
         TrainConfig(target_kl=-1.0)
+
+
+def test_anneal_lr_decays_the_learning_rate_to_zero_over_the_run():
+    import pickle
+
+    from zsrm.rl.ppo import build_ppo
+
+    assert "anneal_lr" not in TrainConfig(anneal_lr=False).to_dict()  # off: older runs keep their config
+    cfg = TrainConfig(goal="stack", reward="oracle", anneal_lr=True, learning_rate=1e-3, **TINY)
+    venv = policy_view(make_vec(cfg, cfg.n_envs, 0), ColourVLM(), cfg)
+    try:
+        model = build_ppo(cfg, venv)
+        schedule = pickle.loads(pickle.dumps(model.lr_schedule))
+        assert schedule(1.0) == pytest.approx(1e-3) and schedule(0.25) == pytest.approx(2.5e-4)
+        assert schedule(-0.01) == 0.0  # the last rollout may pass the run's steps: never a negative step
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        seen = []
+
+        class RecordLr(BaseCallback):
+            def _on_rollout_start(self):
+                seen.append(self.model.policy.optimizer.param_groups[0]["lr"])
+
+            def _on_step(self):
+                return True
+
+        model.learn(4 * cfg.n_envs * cfg.n_steps, callback=RecordLr())
+        seen.append(model.policy.optimizer.param_groups[0]["lr"])
+        # each update takes the fraction of the run still to come after its rollout
+        assert seen == pytest.approx([1e-3, 7.5e-4, 5e-4, 2.5e-4, 0.0])
+        constant = build_ppo(TrainConfig(goal="stack", reward="oracle", learning_rate=1e-3, **TINY), venv)
+        assert constant.lr_schedule(0.1) == pytest.approx(1e-3)
+    finally:
+        venv.close()
