@@ -45,8 +45,8 @@ LADDER = (
     ("v1", {}),
     ("32 px policy views", {"trunk_size": 32, "pixel_size": 32}),
     ("action repeat 4 (gamma, lambda per decision to match)", {"action_repeat": 4, "gamma": 0.96, "gae_lambda": 0.9}),
-    ("16 envs x 32 steps, 4 epochs of minibatch 32 (the default)", {"n_envs": 16, "n_steps": 32, "n_epochs": 4,
-                                                                     "batch_size": 32}),
+    ("16 envs x 32 steps, 4 epochs of minibatch 32", {"n_envs": 16, "n_steps": 32, "n_epochs": 4, "batch_size": 32}),
+    ("learning rate annealed to 0 (the default)", {"anneal_lr": True}),
 )
 
 # Parts that start their own branch of the tree: their inner parts are theirs.

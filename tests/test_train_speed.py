@@ -243,7 +243,10 @@ def test_anneal_lr_decays_the_learning_rate_to_zero_over_the_run():
 
     from zsrm.rl.ppo import build_ppo
 
+    assert TrainConfig().to_dict()["anneal_lr"] is True  # the default since 2026-12-04, so written
     assert "anneal_lr" not in TrainConfig(anneal_lr=False).to_dict()  # off: older runs keep their config
+    older = {k: v for k, v in TrainConfig(goal="stack").to_dict().items() if k != "anneal_lr"}
+    assert TrainConfig.from_dict(older).anneal_lr is False  # a run made before it had a constant rate
     cfg = TrainConfig(goal="stack", reward="oracle", anneal_lr=True, learning_rate=1e-3, **TINY)
     venv = policy_view(make_vec(cfg, cfg.n_envs, 0), ColourVLM(), cfg)
     try:
@@ -266,7 +269,7 @@ def test_anneal_lr_decays_the_learning_rate_to_zero_over_the_run():
         seen.append(model.policy.optimizer.param_groups[0]["lr"])
         # each update takes the fraction of the run still to come after its rollout
         assert seen == pytest.approx([1e-3, 7.5e-4, 5e-4, 2.5e-4, 0.0])
-        constant = build_ppo(TrainConfig(goal="stack", reward="oracle", learning_rate=1e-3, **TINY), venv)
+        constant = build_ppo(TrainConfig(goal="stack", reward="oracle", learning_rate=1e-3, anneal_lr=False, **TINY), venv)
         assert constant.lr_schedule(0.1) == pytest.approx(1e-3)
     finally:
         venv.close()

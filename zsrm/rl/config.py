@@ -69,9 +69,10 @@ class TrainConfig:
     target_kl: float = 0.0
     """stop an update's epochs at a minibatch whose KL from the rollout's policy passes 1.5x this
     (0: never; stable-baselines3's target_kl)"""
-    anneal_lr: bool = False
+    anneal_lr: bool = True
     """decay the learning rate linearly to 0 over the run (CleanRL's anneal_lr): late updates take
-    small steps, so a policy that has learned does not collapse in its last rollouts"""
+    small steps, so a policy that has learned does not collapse in its last rollouts (--no-anneal-lr:
+    a constant rate, as every run before 2026-12-04 had)"""
     eval_every: int = 20_000
     """environment steps between evaluations"""
     eval_episodes: int = 10
@@ -104,7 +105,7 @@ class TrainConfig:
              "target_kl": 0.0, "anneal_lr": False}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
-    LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0}
+    LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False}
 
     def __post_init__(self):
         if self.reward not in REWARDS:
@@ -197,7 +198,7 @@ PRESETS: dict[str, dict] = {
     # the default until 2026-12-04, behind the results committed before then (64 px policy views,
     # action repeat 2, 10 epochs): about a fifth of the default's speed (results/ppo_speed.json)
     "v1": {"trunk_size": 0, "pixel_size": 0, "action_repeat": 2, "n_epochs": 10, "batch_size": 128, "n_envs": 8,
-           "n_steps": 128, "gamma": 0.98, "gae_lambda": 0.95},
+           "n_steps": 128, "gamma": 0.98, "gae_lambda": 0.95, "anneal_lr": False},
 }
 
 
