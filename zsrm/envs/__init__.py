@@ -1,4 +1,5 @@
-"""The scenes, registered with gymnasium under ``zsrm/``.
+"""The scenes, registered with gymnasium under ``zsrm/``; a user's own scene comes in through a
+:class:`SceneAdapter` (:mod:`zsrm.envs.adapter`).
 
 >>> import gymnasium as gym, zsrm.envs
 >>> env = gym.make("zsrm/Tabletop-v0", task="a yellow block on the right of a red block",
@@ -6,6 +7,7 @@
 """
 from gymnasium.envs.registration import register, registry
 
+from zsrm.envs.adapter import SceneAdapter, SceneAdapterError, load_adapter, register_scene
 from zsrm.envs.pendulum import DoublePendulumPixelEnv
 from zsrm.envs.pushing import PushingEnv
 from zsrm.envs.tabletop import TabletopEnv
@@ -26,4 +28,5 @@ def layout_version(env_id: str) -> int:
     return getattr(SCENES[env_id], "layout_version", 1)
 
 
-__all__ = ["DoublePendulumPixelEnv", "PushingEnv", "TabletopEnv", "EPISODE_STEPS", "SCENES", "layout_version"]
+__all__ = ["DoublePendulumPixelEnv", "PushingEnv", "TabletopEnv", "EPISODE_STEPS", "SCENES", "layout_version",
+           "SceneAdapter", "SceneAdapterError", "load_adapter", "register_scene"]
