@@ -1,0 +1,36 @@
+"""What zsrm needs to know about the example scene, written as a user writes it.
+
+    zsrm collect --scene examples.own_scene.adapter:OwnScene --out data/own-scene --images 200
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from examples.own_scene import ENV_ID
+from zsrm.envs import SceneAdapter
+
+# The words goals will use for each object, and the env's body for it.
+BODIES = {
+    "red cylinder": "red_cylinder",
+    "purple cylinder": "purple_cylinder",
+    "orange cylinder": "orange_cylinder",
+    "wooden bowl": "bowl",
+}
+
+
+class OwnScene(SceneAdapter):
+    env_id = ENV_ID
+    xml = str(Path(__file__).with_name("scene.xml"))
+    objects = tuple(BODIES)
+    cameras = {"front": "cam_front", "left": "cam_side", "tilted": "cam_high"}
+    object_width = 0.05  # the cylinders' diameter
+
+    def env_objects(self, phrases):
+        return tuple(BODIES[p] for p in phrases)
+
+    def object_positions(self, env) -> dict[str, np.ndarray]:
+        """Privileged: read from the simulator, for the oracle and evaluation only."""
+        base = env.unwrapped
+        return {p: base.body_position(BODIES[p]) for p in self.objects if BODIES[p] in base.objects}

@@ -1,0 +1,130 @@
+"""The example's gymnasium env, written the way a user writes one, knowing nothing of zsrm.
+
+A planar pusher moves over a wooden table with three cylinders (red, purple, orange) and a
+shallow bowl. Observations are camera images only (a dict, one entry per camera asked for);
+actions are ``(dx, dy)`` of the pusher in [-1, 1]; the reward is always 0. The objects' true
+positions are not in the observation nor in ``info``: only :meth:`OwnSceneEnv.body_position`
+reads them, for whoever is allowed to (the adapter's privileged accessor).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+XML = Path(__file__).with_name("scene.xml")
+CAMERAS = ("cam_front", "cam_side", "cam_high")
+OBJECT_BODIES = ("red_cylinder", "purple_cylinder", "orange_cylinder", "bowl")
+TABLE_TOP = 0.30
+REST_Z = {"bowl": TABLE_TOP + 0.004}  # a body's origin height when it rests on the table
+CYLINDER_REST_Z = TABLE_TOP + 0.03
+PLACE_X, PLACE_Y = 0.19, 0.12  # objects start within these half extents of the table's centre
+MAX_MOVE = 0.02  # metres of pusher target motion per step at |action| = 1
+HIDDEN_GROUP = 3
+
+
+class OwnSceneEnv(gym.Env):
+    """Pixels in, pusher motion out.
+
+    cameras: which of ``CAMERAS`` to observe; image_size: square image side;
+    objects: which of ``OBJECT_BODIES`` are on the table (the others are hidden away).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 12}
+    frame_skip = 10  # 10 x 4 ms per step
+
+    def __init__(self, cameras=CAMERAS, image_size: int = 64, objects=OBJECT_BODIES, render_mode=None):
+        self.cameras = tuple(cameras)
+        for cam in self.cameras:
+            if cam not in CAMERAS:
+                raise ValueError(f"no camera {cam!r} in this scene; its cameras: {', '.join(CAMERAS)}")
+        self.objects = tuple(objects)
+        for name in self.objects:
+            if name not in OBJECT_BODIES:
+                raise ValueError(f"no object {name!r} in this scene; its objects: {', '.join(OBJECT_BODIES)}")
+        self.image_size, self.render_mode = int(image_size), render_mode
+        self.model = mujoco.MjModel.from_xml_path(str(XML))
+        self.data = mujoco.MjData(self.model)
+        self._hide_absent()
+        self.observation_space = gym.spaces.Dict(
+            {c: gym.spaces.Box(0, 255, (self.image_size, self.image_size, 3), np.uint8) for c in self.cameras})
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self._renderer = None
+        self._option = mujoco.MjvOption()
+        self._option.geomgroup[HIDDEN_GROUP] = 0
+
+    def _body(self, name: str) -> int:
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
+
+    def _hide_absent(self):
+        """Absent objects: not drawn, not touched, weightless, parked far from the table."""
+        for name in OBJECT_BODIES:
+            if name in self.objects:
+                continue
+            body = self._body(name)
+            geoms = range(self.model.body_geomadr[body], self.model.body_geomadr[body] + self.model.body_geomnum[body])
+            for g in geoms:
+                self.model.geom_group[g] = HIDDEN_GROUP
+                self.model.geom_contype[g] = self.model.geom_conaffinity[g] = 0
+            self.model.body_gravcomp[body] = 1.0
+
+    def _place(self, name: str, xyz):
+        adr = self.model.jnt_qposadr[self.model.body_jntadr[self._body(name)]]
+        self.data.qpos[adr:adr + 3] = xyz
+        self.data.qpos[adr + 3:adr + 7] = (1, 0, 0, 0)
+
+    def body_position(self, name: str) -> np.ndarray:
+        """True world position of a body (privileged: not part of what the env observes)."""
+        return self.data.xpos[self._body(name)].copy()
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        mujoco.mj_resetData(self.model, self.data)
+        rng, placed = self.np_random, []
+        for i, name in enumerate(OBJECT_BODIES):
+            if name not in self.objects:
+                self._place(name, (3.0 + i, 3.0, 0.1))
+                continue
+            for _ in range(200):  # centres at least 9 cm apart (the bowl is 9 cm wide)
+                xy = rng.uniform((-PLACE_X, -PLACE_Y), (PLACE_X, PLACE_Y))
+                if all(np.linalg.norm(xy - q) > 0.09 for q in placed):
+                    break
+            placed.append(xy)
+            self._place(name, (*xy, REST_Z.get(name, CYLINDER_REST_Z)))
+        start = rng.uniform((-0.2, -0.14), (0.2, -0.11))  # the pusher starts along the front edge
+        self.data.qpos[:2] = start
+        self.data.ctrl[:] = start
+        mujoco.mj_forward(self.model, self.data)
+        for _ in range(5):  # settle onto the table
+            mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        return self._observation(), {}
+
+    def step(self, action):
+        action = np.clip(np.asarray(action, np.float64), -1.0, 1.0)
+        lo, hi = self.model.actuator_ctrlrange[:, 0], self.model.actuator_ctrlrange[:, 1]
+        self.data.ctrl[:] = np.clip(self.data.ctrl + MAX_MOVE * action, lo, hi)
+        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        fell = any(self.body_position(n)[2] < TABLE_TOP - 0.05 for n in self.objects)
+        return self._observation(), 0.0, bool(fell), False, {}
+
+    def _render(self, camera: str) -> np.ndarray:
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, self.image_size, self.image_size)
+        self._renderer.update_scene(self.data, camera=camera, scene_option=self._option)
+        return self._renderer.render().copy()
+
+    def _observation(self) -> dict:
+        return {c: self._render(c) for c in self.cameras}
+
+    def render(self):
+        return self._render(self.cameras[0])
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
