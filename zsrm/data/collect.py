@@ -9,6 +9,12 @@ half of them with a block dropped into it at the reset. The box is stored apart 
 colours (``box_present``, ``box_position``, ``box_pixels_<camera>``, only in datasets collected
 with ``p_box``), so the colour arrays keep their shape and meaning in every dataset.
 
+With ``scene`` (``zsrm collect --scene module:Class``), the data come from a user's own scene
+through its :class:`zsrm.envs.SceneAdapter`: the same shards, keyed by Table 1's camera roles
+(``images_front``, ...), with the adapter's object phrases in place of the colours (the
+manifest's ``colours``). True positions come from the adapter's privileged accessor and, like
+zsrm's own, are for evaluation only.
+
 >>> import tempfile
 >>> folder = tempfile.mkdtemp()
 >>> data = collect(CollectConfig(images=4, shard_size=2, episode_steps=4, record_every=2), folder, progress=False)
@@ -52,6 +58,7 @@ class CollectConfig:
     p_side: float = 0.25  # chance that an object starts beside another (near or touching)
     p_hold: float = 0.0  # tabletop: chance that the gripper starts holding a block above another
     p_box: float = 0.0  # tabletop: chance that a scene also holds the open box (half of those with a block in it)
+    scene: str = ""  # your own scene instead of --scenes: a SceneAdapter as module:Class or a registered id (docs/own-scene.md)
     colours: tuple[str, ...] = field(init=False)
 
     def __post_init__(self):
@@ -63,8 +70,9 @@ class CollectConfig:
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {getattr(self, name)!r}")
         self.scenes, self.cameras, self.exclude = tuple(self.scenes), tuple(self.cameras), tuple(self.exclude)
+        self._adapter = self._user_scene() if self.scene else None
         for s in self.scenes:
-            if s not in SCENE_IDS:
+            if s not in SCENE_IDS and not self.scene:
                 raise ValueError(f"unknown scene {s!r}; known scenes: {', '.join(SCENE_IDS)}")
         if not self.scenes:
             raise ValueError("give at least one scene")
@@ -72,12 +80,35 @@ class CollectConfig:
             if c not in CAMERAS:
                 raise ValueError(f"unknown camera {c!r}; known cameras: {', '.join(CAMERAS)}")
         for c in self.exclude:
-            if c not in COLOURS:
-                raise ValueError(f"unknown colour {c!r} to exclude; known colours: {', '.join(COLOURS)}")
-        self.colours = tuple(c for c in COLOURS if c not in self.exclude)
+            if c not in self.objects:
+                raise ValueError(f"unknown {'object' if self.scene else 'colour'} {c!r} to exclude; known: "
+                                 f"{', '.join(self.objects)}")
+        self.colours = tuple(c for c in self.objects if c not in self.exclude)
         if not 1 <= self.min_objects <= self.max_objects <= len(self.colours):
             raise ValueError(f"need 1 <= min_objects <= max_objects <= {len(self.colours)} "
                              f"(colours left: {', '.join(self.colours)}), got {self.min_objects}..{self.max_objects}")
+
+    def _user_scene(self):
+        """The adapter that ``scene`` names; the dataset's one scene is then the adapter's name."""
+        from zsrm.envs.adapter import load_adapter
+
+        if self.scenes not in (("tabletop",), (self.scene,)):
+            raise ValueError(f"give --scene (your own scene) or --scenes (zsrm's: {', '.join(SCENE_IDS)}), not both")
+        if self.p_hold or self.p_box:
+            raise ValueError("--p-hold and --p-box are for zsrm's tabletop, not for your own scene")
+        adapter = load_adapter(self.scene)
+        self.scenes = (self.scene,)
+        return adapter
+
+    @property
+    def adapter(self):
+        """The own scene's :class:`zsrm.envs.SceneAdapter` (None for zsrm's scenes)."""
+        return self._adapter
+
+    @property
+    def objects(self) -> tuple[str, ...]:
+        """Every object the data can hold (the arrays' K): zsrm's colours, or the adapter's phrases."""
+        return tuple(self._adapter.objects) if self._adapter is not None else COLOURS
 
     @property
     def n_shards(self) -> int:
@@ -86,7 +117,8 @@ class CollectConfig:
     def to_json(self) -> dict:
         d = asdict(self)
         d.pop("colours")
-        for name in ("p_hold", "p_box"):  # added later: datasets collected before them keep matching their manifest
+        # added later: datasets collected before them keep matching their manifest
+        for name in ("p_hold", "p_box", "scene"):
             if not d[name]:
                 d.pop(name)
         return d
@@ -100,6 +132,12 @@ class _Envs:
 
     def get(self, scene: str, colours: tuple[str, ...]):
         key = (scene, colours)
+        if key not in self.envs and self.cfg.adapter is not None:
+            from zsrm.envs.adapter import check_env
+
+            adapter = self.cfg.adapter
+            env = adapter.make_env(tuple(adapter.roles[c] for c in self.cfg.cameras), self.cfg.image_size, colours)
+            self.envs[key] = check_env(adapter, env, self.cfg.cameras)
         if key not in self.envs:
             import gymnasium as gym
 
@@ -142,15 +180,13 @@ def collect_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> 
     """The arrays of shard ``index``: a function of ``cfg`` and ``index`` only."""
     from zsrm.envs.cameras import project
 
+    if cfg.adapter is not None:
+        return collect_own_shard(cfg, index, envs)
     own = envs is None
     envs = envs or _Envs(cfg)
     rng = np.random.default_rng([cfg.seed, index])
-    n = min(cfg.shard_size, cfg.images - index * cfg.shard_size)
-    k = len(COLOURS)
-    out = {f"images_{c}": np.zeros((n, cfg.image_size, cfg.image_size, 3), np.uint8) for c in cfg.cameras}
-    out.update({f"pixels_{c}": np.full((n, k, 2), np.nan, np.float32) for c in cfg.cameras})
-    out.update(positions=np.full((n, k, 3), np.nan, np.float32), present=np.zeros((n, k), bool),
-               scene=np.zeros(n, np.int8), episode=np.zeros(n, np.int32), step=np.zeros(n, np.int16))
+    n = _shard_len(cfg, index)
+    out = _empty_shard(cfg, n)
     if cfg.p_box:  # only datasets that can hold the box have its arrays
         out.update(box_present=np.zeros(n, bool), box_position=np.full((n, 3), np.nan, np.float32))
         out.update({f"box_pixels_{c}": np.full((n, 2), np.nan, np.float32) for c in cfg.cameras})
@@ -197,6 +233,86 @@ def collect_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> 
     return out
 
 
+def _empty_shard(cfg: CollectConfig, n: int) -> dict[str, np.ndarray]:
+    """The arrays of ``n`` images over every object the data can hold (NaN: not there)."""
+    k = len(cfg.objects)
+    out = {f"images_{c}": np.zeros((n, cfg.image_size, cfg.image_size, 3), np.uint8) for c in cfg.cameras}
+    out.update({f"pixels_{c}": np.full((n, k, 2), np.nan, np.float32) for c in cfg.cameras})
+    out.update(positions=np.full((n, k, 3), np.nan, np.float32), present=np.zeros((n, k), bool),
+               scene=np.zeros(n, np.int8), episode=np.zeros(n, np.int32), step=np.zeros(n, np.int16))
+    return out
+
+
+def collect_own_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> dict[str, np.ndarray]:
+    """Shard ``index`` of a user's own scene (``cfg.scene``): random scenes of its objects (as
+    many as the adapter's env can leave out), its exploration actions, every camera role. True
+    positions come from the adapter's privileged accessor, for evaluation only."""
+    own = envs is None
+    envs = envs or _Envs(cfg)
+    adapter = cfg.adapter
+    rng = np.random.default_rng([cfg.seed, index])
+    n = _shard_len(cfg, index)
+    out, row, episode = _empty_shard(cfg, n), 0, 0
+    try:
+        while row < n:
+            objects = cfg.objects
+            if adapter.subsets:
+                chosen = set(rng.choice(cfg.colours, int(rng.integers(cfg.min_objects, cfg.max_objects + 1)),
+                                        replace=False).tolist())
+                objects = tuple(o for o in cfg.objects if o in chosen)
+            env = envs.get(cfg.scene, objects)
+            obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)))
+            for step in range(cfg.episode_steps):
+                if step % cfg.record_every == 0 and row < n:
+                    _record_own(out, row, cfg, env, obs)
+                    out["episode"][row], out["step"][row] = episode, step
+                    row += 1
+                obs, _, terminated, truncated, _ = env.step(adapter.exploration_action(env, rng))
+                if terminated or truncated:
+                    break
+            episode += 1
+    finally:
+        if own:
+            envs.close()
+    return out
+
+
+def _record_own(out: dict, row: int, cfg: CollectConfig, env, obs) -> None:
+    """One image per camera role, and (privileged, evaluation only) the objects' true positions
+    and their projections through each role's camera."""
+    from zsrm.envs.cameras import project
+
+    adapter = cfg.adapter
+    images = adapter.observe(obs)
+    for role in cfg.cameras:
+        out[f"images_{role}"][row] = images[role]
+    for phrase, xyz in adapter.object_positions(env).items():
+        i = cfg.objects.index(phrase)
+        out["positions"][row, i] = xyz
+        out["present"][row, i] = True
+        for role in cfg.cameras:
+            out[f"pixels_{role}"][row, i] = project(env, adapter.roles[role], xyz, cfg.image_size)
+
+
+def _own_manifest(cfg: CollectConfig) -> dict:
+    """What a dataset of a user's own scene records beside its shards: the objects, each role's
+    camera, and one object's width in pixels per role (measured at the objects' mean position
+    after the first reset; the labeler's pixel scale). No table calibration: see docs/own-scene.md."""
+    from zsrm.envs.cameras import object_width_px
+
+    adapter, envs = cfg.adapter, _Envs(cfg)
+    try:
+        env = envs.get(cfg.scene, cfg.objects)
+        env.reset(seed=cfg.seed)
+        centre = np.mean(list(adapter.object_positions(env).values()), axis=0)
+        widths = {role: object_width_px(env, adapter.roles[role], cfg.image_size, adapter.object_width / 2, centre)
+                  for role in cfg.cameras}
+    finally:
+        envs.close()
+    return {"colours": list(cfg.objects), "block_width_px": {cfg.scene: widths}, "table_homography": {},
+            "scene_adapter": {"name": adapter.name, "env_id": adapter.env_id, "cameras": adapter.roles}}
+
+
 def box_reference_point(xyz) -> np.ndarray:
     """The box's point whose projection is its true pixel centre: its centre at the height of a
     block's centre (a block in the box rests 4 mm above it), the height at which the tilted
@@ -220,9 +336,9 @@ def collect(cfg: CollectConfig, folder, progress: bool = True) -> ExplorationDat
     """Collect (or finish collecting) the dataset ``cfg`` describes into ``folder``."""
     from tqdm import tqdm
 
-    shards = ShardFolder(folder, kind="exploration", config=cfg.to_json(), n_shards=cfg.n_shards,
-                         extra={"colours": list(COLOURS), "block_width_px": block_widths(cfg),
-                                "table_homography": table_homographies(cfg)})
+    extra = _own_manifest(cfg) if cfg.adapter is not None else {
+        "colours": list(COLOURS), "block_width_px": block_widths(cfg), "table_homography": table_homographies(cfg)}
+    shards = ShardFolder(folder, kind="exploration", config=cfg.to_json(), n_shards=cfg.n_shards, extra=extra)
     pending = shards.pending()
     bar = tqdm(total=cfg.images, initial=cfg.images - sum(_shard_len(cfg, i) for i in pending),
                unit="img", desc="collect", disable=not progress)

@@ -108,8 +108,8 @@ class SceneAdapter:
             raise SceneAdapterError(f"{self.name}: cannot make env {self.env_id!r}: {err}") from None
 
     def observe(self, observation) -> dict[str, np.ndarray]:
-        """The env's observation -> ``{role: image}``."""
-        return {role: observation[cam] for role, cam in self.roles.items()}
+        """The env's observation -> ``{role: image}`` of the roles whose camera it holds."""
+        return {role: observation[cam] for role, cam in self.roles.items() if cam in observation}
 
     def exploration_action(self, env: gym.Env, rng: np.random.Generator) -> np.ndarray:
         """An exploration action (paper 2.2: random actions): uniform over a bounded Box."""
@@ -199,9 +199,10 @@ def check_model_cameras(adapter: SceneAdapter, model: mujoco.MjModel) -> None:
                                     f"the model; its cameras: {', '.join(names) or 'none'}")
 
 
-def check_env(adapter: SceneAdapter, env: gym.Env) -> gym.Env:
+def check_env(adapter: SceneAdapter, env: gym.Env, roles=ROLES) -> gym.Env:
     """An env of the adapter: its MuJoCo model has the roles' cameras (MuJoCo envs are the
-    ones whose true pixels zsrm can compute), and it observes each role's camera as an image."""
+    ones whose true pixels zsrm can compute), and it observes the camera of each of ``roles``
+    (all three by default) as an image."""
     model = getattr(env.unwrapped, "model", None)
     if not isinstance(model, mujoco.MjModel):
         raise SceneAdapterError(f"{adapter.name}: {type(env.unwrapped).__name__} has no MuJoCo model "
@@ -211,7 +212,8 @@ def check_env(adapter: SceneAdapter, env: gym.Env) -> gym.Env:
     if not isinstance(space, gym.spaces.Dict):
         raise SceneAdapterError(f"{adapter.name}: the env observes {space}, not camera images; zsrm reads "
                                 "pixels only: observe a dict {camera name: (H, W, 3) uint8 image}")
-    for role, cam in adapter.roles.items():
+    for role in roles:
+        cam = adapter.roles[role]
         box = space.spaces.get(cam)
         if box is None or box.dtype != np.uint8 or len(box.shape) != 3 or box.shape[-1] != 3:
             got = "nothing" if box is None else f"{box}"
