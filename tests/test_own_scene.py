@@ -1,0 +1,242 @@
+"""A scene zsrm was not built for: the adapter contract (one clear line for each bad adapter), the
+example scene of examples/own_scene (gymnasium's checks, a render per camera role), a tiny
+collect from it that resumes, and zsrm's code that knows nothing of it."""
+from __future__ import annotations
+
+import ast
+import doctest
+import importlib
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # the example lives beside zsrm, as a user's code would
+    sys.path.insert(0, str(ROOT))
+
+from examples.own_scene.adapter import BODIES, OwnScene  # noqa: E402
+from examples.own_scene.env import OwnSceneEnv  # noqa: E402
+from zsrm.cli import main  # noqa: E402
+from zsrm.data.collect import CollectConfig, collect  # noqa: E402
+from zsrm.data.dataset import ExplorationData  # noqa: E402
+from zsrm.envs.adapter import (ROLES, SceneAdapter, SceneAdapterError, check_env, check_phrases_known,  # noqa: E402
+                               load_adapter, register_scene)
+
+SPEC = "examples.own_scene.adapter:OwnScene"
+
+
+def _adapter(**attrs) -> type[SceneAdapter]:
+    return type("Changed", (OwnScene,), attrs)
+
+
+def _one_line(err: Exception) -> str:
+    text = str(err)
+    assert text and "\n" not in text
+    return text
+
+
+# --- the contract ---------------------------------------------------------------------------
+@pytest.mark.parametrize("attrs, words", [
+    ({"cameras": {"front": "cam_front", "left": "cam_side", "top": "cam_high"}}, "unknown camera role 'top'"),
+    ({"cameras": {"front": "cam_front", "left": "cam_side"}}, "no camera plays the 'tilted' role"),
+    ({"cameras": {"front": "cam_front", "left": "cam_front", "tilted": "cam_high"}}, "are both camera 'cam_front'"),
+    ({"cameras": {"front": "cam_front", "left": "cam_side", "tilted": "cam_top"}},
+     "camera 'cam_top' is not a camera of the model; its cameras: cam_front, cam_side, cam_high"),
+    ({"objects": ()}, "objects must be a tuple of noun phrases"),
+    ({"objects": "red cylinder"}, "objects must be a tuple of noun phrases"),
+    ({"objects": ("red cylinder", "Red  Cylinder!")}, "is not a noun phrase"),
+    ({"objects": ("red cylinder", "red cylinder")}, "'red cylinder' is named more than once"),
+    ({"object_width": 0}, "object_width must be a positive number"),
+    ({"xml": "/no/such/scene.xml"}, "cannot load xml /no/such/scene.xml"),
+])
+def test_a_bad_adapter_is_one_line(attrs, words):
+    with pytest.raises(SceneAdapterError) as err:
+        load_adapter(_adapter(**attrs))
+    assert words in _one_line(err.value)
+
+
+def test_a_camera_the_model_lacks_is_caught_from_the_env_without_an_xml():
+    adapter = load_adapter(_adapter(xml=None, cameras={"front": "cam_front", "left": "cam_side", "tilted": "cam_top"}))
+    env = OwnSceneEnv(cameras=("cam_front", "cam_side"), image_size=16)
+    with pytest.raises(SceneAdapterError, match="'tilted' role's camera 'cam_top' is not a camera of the model"):
+        check_env(adapter, env)
+
+
+class _StateEnv(OwnSceneEnv):
+    """The example scene observed as numbers (its pusher's position): no camera images."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.observation_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float64)
+
+    def _observation(self):
+        return self.data.qpos[:2].copy()
+
+
+def test_an_env_without_image_observations_is_one_line():
+    adapter = load_adapter(OwnScene)
+    with pytest.raises(SceneAdapterError) as err:
+        check_env(adapter, _StateEnv())
+    assert "not camera images; zsrm reads pixels only" in _one_line(err.value)
+
+
+def test_an_env_that_does_not_observe_a_role_is_one_line():
+    adapter = load_adapter(OwnScene)
+    with pytest.raises(SceneAdapterError) as err:
+        check_env(adapter, OwnSceneEnv(cameras=("cam_front", "cam_side"), image_size=16))
+    assert "observes nothing for camera 'cam_high' (the 'tilted' role)" in _one_line(err.value)
+
+
+def test_unknown_phrases_are_one_line():
+    adapter = load_adapter(SPEC)
+    assert check_phrases_known(adapter, ("wooden bowl",)) == ("wooden bowl",)
+    with pytest.raises(SceneAdapterError) as err:
+        check_phrases_known(adapter, ("green cube",))
+    assert "unknown object 'green cube'; this scene's objects: red cylinder" in _one_line(err.value)
+    with pytest.raises(ValueError, match="unknown object 'green cube' to exclude"):
+        CollectConfig(scene=SPEC, exclude=("green cube",))
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("nowhere_at_all.scenes:Mugs", "cannot import 'nowhere_at_all.scenes'"),
+    ("examples.own_scene.adapter:NoSuchAdapter", "has no 'NoSuchAdapter'"),
+    ("examples.own_scene.adapter:BODIES", "is not a zsrm.envs.SceneAdapter"),
+    ("justaname", "give module:Class"),
+])
+def test_a_scene_that_does_not_load_is_one_line(spec, words):
+    with pytest.raises(SceneAdapterError) as err:
+        load_adapter(spec)
+    assert words in _one_line(err.value)
+
+
+def test_a_registered_id_names_an_adapter():
+    register_scene("test-own-scene", SPEC)
+    assert isinstance(load_adapter("test-own-scene"), OwnScene)
+    with pytest.raises(SceneAdapterError, match="without ':'"):
+        register_scene("a:b", SPEC)
+
+
+def test_the_command_line_prints_a_bad_scene_as_one_line(tmp_path, capsys):
+    assert main(["collect", "--scene", "nowhere_at_all.scenes:Mugs", "--out", str(tmp_path / "d")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("zsrm collect: error: scene 'nowhere_at_all.scenes:Mugs'")
+    assert main(["collect", "--scene", SPEC, "--scenes", "pushing", "--out", str(tmp_path / "d")]) == 2
+    assert "not both" in capsys.readouterr().err
+
+
+def test_the_adapter_docstring_runs():
+    result = doctest.testmod(importlib.import_module("zsrm.envs.adapter"), optionflags=doctest.ELLIPSIS)
+    assert result.attempted > 0 and result.failed == 0
+
+
+# --- the example scene ----------------------------------------------------------------------
+def test_the_example_env_passes_gymnasiums_checks():
+    from gymnasium.utils.env_checker import check_env as gym_check
+
+    adapter = load_adapter(SPEC)
+    env = adapter.make_env(tuple(adapter.roles.values()), 64)
+    gym_check(env.unwrapped)
+    assert check_env(adapter, env) is env
+
+
+def test_the_example_renders_each_role_at_64_px():
+    adapter = load_adapter(SPEC)
+    env = adapter.make_env(tuple(adapter.roles.values()), 64, ("red cylinder", "wooden bowl"))
+    obs, info = env.reset(seed=3)
+    assert info == {}  # the env tells the agent nothing of where things are
+    images = adapter.observe(obs)
+    assert list(images) == list(ROLES)
+    for role, image in images.items():
+        assert image.shape == (64, 64, 3) and image.dtype == np.uint8 and image.std() > 10, role
+    assert not np.array_equal(images["front"], images["left"])
+    assert not np.array_equal(images["front"], images["tilted"])
+    # red shows where the red cylinder is, in the front camera
+    red = (images["front"][..., 0] > 150) & (images["front"][..., 1] < 60) & (images["front"][..., 2] < 60)
+    assert red.sum() > 5
+    positions = adapter.object_positions(env)
+    assert sorted(positions) == ["red cylinder", "wooden bowl"]
+    env.close()
+
+
+def test_the_example_moves_only_with_its_pusher():
+    adapter = load_adapter(SPEC)
+    env = adapter.make_env(("cam_front",), 32)
+    env.reset(seed=0)
+    start = env.unwrapped.data.qpos[:2].copy()
+    for _ in range(5):
+        env.step(np.array([1.0, 1.0], np.float32))
+    assert np.all(env.unwrapped.data.qpos[:2] > start + 0.05)  # the pusher followed the actions
+
+
+# --- collect --------------------------------------------------------------------------------
+def _tiny(**kw) -> CollectConfig:
+    return CollectConfig(scene=SPEC, images=6, shard_size=3, episode_steps=4, record_every=2, **kw)
+
+
+def test_a_tiny_collect_from_the_example_scene_resumes(tmp_path):
+    cfg = _tiny()
+    data = collect(cfg, tmp_path / "a", progress=False)
+    arrays = data.load()
+    assert len(data) == 6 and data.colours == tuple(BODIES) and data.scenes == (SPEC,)
+    assert set(data.block_width_px[SPEC]) == set(ROLES) and all(3 < w < 12 for w in data.block_width_px[SPEC].values())
+    assert arrays["images_tilted"].shape == (6, 64, 64, 3) and arrays["positions"].shape == (6, 4, 3)
+    present = arrays["present"]
+    assert present.sum(axis=1).min() >= 2
+    assert np.isnan(arrays["positions"][~present]).all() and np.isfinite(arrays["positions"][present]).all()
+    for role in ROLES:  # true pixels (evaluation only) fall inside the image
+        xy = arrays[f"pixels_{role}"][present]
+        assert ((xy > 0) & (xy < 63)).all(), role
+    manifest = json.loads((tmp_path / "a" / "manifest.json").read_text())
+    assert manifest["scene_adapter"]["cameras"] == {"front": "cam_front", "left": "cam_side", "tilted": "cam_high"}
+    # a run killed after its first shard resumes with the same data
+    shutil.copytree(tmp_path / "a", tmp_path / "b")
+    (tmp_path / "b" / "shard_00001.npz").unlink()
+    manifest["shards"].pop("shard_00001")
+    manifest["complete"] = False
+    (tmp_path / "b" / "manifest.json").write_text(json.dumps(manifest))
+    resumed = collect(cfg, tmp_path / "b", progress=False).load()
+    assert all(np.array_equal(resumed[k], arrays[k], equal_nan=True) for k in arrays)
+    with pytest.raises(ValueError, match="made with other options"):
+        collect(_tiny(seed=1), tmp_path / "a", progress=False)
+
+
+def test_collect_from_the_command_line(tmp_path, capsys):
+    out = tmp_path / "own"
+    assert main(["collect", "--scene", SPEC, "--out", str(out), "--images", "2", "--shard-size", "2",
+                 "--episode-steps", "2", "--record-every", "1", "--cameras", "front", "tilted", "--quiet"]) == 0
+    assert "2 images x 2 cameras" in capsys.readouterr().out
+    assert sorted(k for k in ExplorationData(out).load() if k.startswith("images_")) == ["images_front", "images_tilted"]
+
+
+def test_zsrms_own_collect_config_is_unchanged():
+    """A dataset of zsrm's scenes keeps the manifest config it always had (it resumes)."""
+    assert "scene" not in CollectConfig().to_json() and CollectConfig().adapter is None
+
+
+# --- zsrm knows nothing of the example ------------------------------------------------------
+def _zsrm_sources() -> list[Path]:
+    return sorted(p for p in (ROOT / "zsrm").rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def test_no_zsrm_module_imports_the_example():
+    bad = []
+    for path in _zsrm_sources():
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            bad += [f"{path.relative_to(ROOT)}:{node.lineno}" for n in names if n.split(".")[0] == "examples"]
+    assert not bad
+
+
+def test_no_zsrm_source_names_the_examples_objects():
+    # the phrases, the env's own names ("bowl" alone is a word zsrm's goal paraphrases may use)
+    words = [*BODIES, *(b for b in BODIES.values() if "_" in b), "examples.own_scene", "OwnScene", "cam_front",
+             "cam_side", "cam_high"]
+    files = [p for p in (ROOT / "zsrm").rglob("*") if p.is_file() and p.suffix in (".py", ".json", ".xml", ".md")]
+    bad = [f"{p.relative_to(ROOT)}: {w!r}" for p in files for w in words if w in p.read_text(errors="ignore")]
+    assert not bad, bad
