@@ -213,6 +213,14 @@ def test_collect_from_the_command_line(tmp_path, capsys):
     assert sorted(k for k in ExplorationData(out).load() if k.startswith("images_")) == ["images_front", "images_tilted"]
 
 
+def test_stages_that_do_not_take_an_own_scene_yet_say_so_in_one_line(tmp_path, capsys):
+    collect(CollectConfig(scene=SPEC, images=2, shard_size=2, episode_steps=2, record_every=1), tmp_path / "own",
+            progress=False)
+    assert main(["label", str(tmp_path / "own"), "--vlm", "scene"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"holds data of your own scene ({SPEC}); zsrm label does not take" in err[0]
+
+
 def test_zsrms_own_collect_config_is_unchanged():
     """A dataset of zsrm's scenes keeps the manifest config it always had (it resumes)."""
     assert "scene" not in CollectConfig().to_json() and CollectConfig().adapter is None

@@ -50,6 +50,19 @@ class ExplorationData:
         self.table_homography: dict[str, dict[str, list]] = self.manifest.get("table_homography", {})
 
     @property
+    def scene_adapter(self) -> str | None:
+        """The adapter (``module:Class``) of data collected from a user's own scene (``zsrm collect
+        --scene``); None for data of zsrm's scenes."""
+        info = self.manifest.get("scene_adapter")
+        return info.get("name") if isinstance(info, dict) else None
+
+    def require_zsrm_scenes(self, stage: str) -> None:
+        """One clear line, not a crash further on, from a stage that reads zsrm's scenes only."""
+        if self.scene_adapter:
+            raise ValueError(f"{self.folder} holds data of your own scene ({self.scene_adapter}); {stage} does not "
+                             "take an own scene yet (docs/own-scene.md, 'Not yet')")
+
+    @property
     def has_box(self) -> bool:
         """Collected with ``p_box``: some tabletop scenes hold the box, whose arrays are
         ``box_present`` (N,), ``box_position`` (N, 3), ``box_pixels_<camera>`` (N, 2)."""

@@ -108,6 +108,7 @@ def _tables(data, cfg, pixels: dict, present, scene_index, world: bool = False, 
 def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
     """The grounding report of a labelled dataset (see the module docstring)."""
     data = ExplorationData(data_folder)
+    data.require_zsrm_scenes("zsrm eval-grounding")
     manifest, lab = load_labels(data, labels)
     cfg = LabelConfig(**manifest["config"])
     arr = data.load(["positions", "present", "scene"] + [f"pixels_{c}" for c in data.cameras] + data.box_keys)

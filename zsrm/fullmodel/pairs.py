@@ -176,6 +176,7 @@ class CaptionedImages:
         """A collected and labelled dataset folder: its images, the Grad-CAM captions of
         ``labels`` and, for the complements, each scene's object list (what the labeler reads)."""
         data = ExplorationData(folder)
+        data.require_zsrm_scenes("zsrm finetune")
         captions = data.captions(labels)  # Grad-CAM captions only (oracle=None)
         images, groups, objects = {c: [] for c in data.cameras}, [], []
         for s, name in enumerate(data.shards):

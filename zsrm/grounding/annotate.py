@@ -242,6 +242,7 @@ def label_dataset(data_folder, cfg: LabelConfig, out: str | Path = LABELS, vlm=N
     from tqdm import tqdm
 
     data = ExplorationData(data_folder)
+    data.require_zsrm_scenes("zsrm label")
     if not data.shards:
         raise ValueError(f"{data_folder} holds no finished shard: run zsrm collect first")
     folder = data.labels_folder(out)
