@@ -27,13 +27,22 @@ from zsrm.vlm.pretrain import PretrainConfig, check_config
 def pretrain_scene_vlm(cfg: PretrainConfig, fresh: bool = False, progress: bool = True):
     """The renders (a data stage, cached in WORKDIR/renders; the pendulum's in
     WORKDIR/pendulum-renders when ``cfg.pendulum_scenes``, the box's in WORKDIR/box-renders when
-    ``cfg.box_scenes``), then the scene VLM trained on them."""
+    ``cfg.box_scenes``; a user's own scene's alone, in WORKDIR/own-renders, when ``cfg.scene``),
+    then the scene VLM trained on them."""
     from zsrm.data.renders import load_renders
     from zsrm.vlm.pretrain import check_config, pretrain
 
     check_config(cfg)
     if fresh:
         shutil.rmtree(cfg.workdir, ignore_errors=True)
+    if cfg.scene:  # a user's own scene: its renders, captioned with its objects' phrases
+        from zsrm.data.own_renders import load_own_renders
+        from zsrm.envs.adapter import load_adapter
+
+        adapter = load_adapter(cfg.scene)
+        renders = load_own_renders(Path(cfg.workdir) / "own-renders", adapter, cfg.scenes, cfg.shard_size, cfg.seed,
+                                   cfg.image_size, progress)
+        return pretrain(cfg, renders, progress, objects=tuple(adapter.objects))
     renders = load_renders(Path(cfg.workdir) / "renders", cfg.scenes, cfg.shard_size, cfg.seed, cfg.image_size,
                            progress)
     pendulum = None

@@ -67,6 +67,47 @@ def presence_caption(colours: Iterable[str], shape: str, rng: np.random.Generato
     return join_phrases([phrases[i] for i in chosen])
 
 
+def phrase_probe(phrase: str) -> str:
+    """The presence probe of an object of a user's own scene, named by its noun phrase.
+
+    >>> phrase_probe("red mug"), phrase_probe("orange plate")
+    ('a red mug', 'an orange plate')
+    """
+    return f"{'an' if phrase[:1] in 'aeiou' else 'a'} {phrase}"
+
+
+def phrases_caption(phrases: Iterable[str], rng: np.random.Generator) -> str:
+    """:func:`presence_caption` for a user's own scene: a random non-empty subset of the visible
+    objects' ``phrases``, in random order, never where they are.
+
+    >>> phrases_caption(["red mug", "blue plate"], np.random.default_rng(2))
+    'a blue plate and a red mug'
+    """
+    probes = [phrase_probe(p) for p in phrases]
+    if not probes:
+        raise ValueError("a presence caption needs at least one visible object")
+    k = int(rng.integers(1, len(probes) + 1))
+    return join_phrases([probes[i] for i in rng.permutation(len(probes))[:k]])
+
+
+def all_phrases_captions(phrases: Iterable[str], limit: int = 5000) -> list[str]:
+    """Every caption :func:`phrases_caption` can write for these objects (their ordered
+    subsets), or none when there would be more than ``limit`` (they are then encoded as drawn)."""
+    from itertools import permutations
+    from math import perm
+
+    probes = [phrase_probe(p) for p in phrases]
+    if sum(perm(len(probes), k) for k in range(1, len(probes) + 1)) > limit:
+        return []
+    return [join_phrases(list(p)) for k in range(1, len(probes) + 1) for p in permutations(probes, k)]
+
+
+def visible_names(visible_row: np.ndarray, names, image_size: int = 64) -> list[str]:
+    """The ``names`` (in order with ``visible_row``) whose objects show enough pixels to be named."""
+    threshold = min_visible_pixels(image_size)
+    return [c for c, n in zip(names, visible_row) if n >= threshold]
+
+
 def all_presence_captions(shape: str) -> list[str]:
     """Every caption :func:`presence_caption` can write for a shape (ordered subsets of COLOURS)."""
     from itertools import permutations
@@ -93,8 +134,7 @@ def box_visible(pixels: int, image_size: int = 64) -> bool:
 
 def visible_colours(visible_row: np.ndarray, image_size: int = 64) -> list[str]:
     """Colours whose objects show enough pixels to be named."""
-    threshold = min_visible_pixels(image_size)
-    return [c for c, n in zip(COLOURS, visible_row) if n >= threshold]
+    return visible_names(visible_row, COLOURS, image_size)
 
 
 def presence_scores(vlm, images: np.ndarray, shapes: np.ndarray, batch_size: int = 256) -> tuple[np.ndarray, np.ndarray]:

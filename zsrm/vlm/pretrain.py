@@ -25,6 +25,13 @@ VLM's image trunk, up to and including the Grad-CAM layer, bit-identical (no gra
 weight decay): RL policies read the trunk's feature map, so they see the same features while
 the head and the text projection learn the box. These too are other models, for another ``out``.
 
+With ``scene`` (a user's own scene, :class:`zsrm.envs.SceneAdapter`), the renders are that
+scene's (:mod:`zsrm.data.own_renders`, cached in ``WORKDIR/own-renders``) and the captions name
+its objects by the adapter's phrases ("a red mug and a blue plate"): the scene VLM learns the
+new objects' names. Which objects a render shows is read from the simulator (the adapter's
+privileged accessor), the one step of the pipeline that reads it; with real CLIP weights it is
+not needed. Another model again, for another ``out``.
+
 Resumable: the model, optimizer and step are checkpointed in ``WORKDIR/checkpoint/``;
 running the same command again continues where a killed run stopped. Every step's batch, captions and flips come from
 ``np.random.default_rng([seed, step])``, so a resumed run matches an uninterrupted one.
@@ -48,7 +55,8 @@ from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.pendulum import POSES, all_pendulum_captions, mirrored, pendulum_caption
 from zsrm.vlm.losses import multi_positive_contrastive_loss
-from zsrm.vlm.presence import all_box_captions, all_presence_captions, box_visible, presence_caption, visible_colours
+from zsrm.vlm.presence import (all_box_captions, all_phrases_captions, all_presence_captions, box_visible,
+                                phrases_caption, presence_caption, visible_colours, visible_names)
 from zsrm.vlm.scene import SCENE_PRESETS, SHIPPED_SCENE_DIR, SceneConfig, SceneFolder, SceneVLM, create_scene_vlm
 
 SHAPES = list(SCENE_SHAPES.values())  # a render's "shape" index -> the shape its captions name
@@ -81,13 +89,14 @@ class PretrainConfig:
     box_scenes: int = 0  # tabletop scenes with the open box (captioned "a box" where it shows) to mix in; needs --out
     init: str = ""  # start from this scene VLM folder (e.g. zsrm/vlm/weights/scene), not random weights; needs --out
     freeze_trunk: bool = False  # --init's image trunk (to the Grad-CAM layer) stays bit-identical; the rest learns
+    scene: str = ""  # your own scene (module:Class or a registered id): learn its objects' names from its renders, not zsrm's; needs --out
 
     # Settings that define the run: a checkpoint made with others cannot be resumed.
     IDENTITY = ("arch", "scenes", "shard_size", "image_size", "steps", "batch_size", "lr", "weight_decay",
                 "warmup_steps", "seed")
     # Settings added after the shipped VLM was trained: part of the identity only when changed,
     # so that its checkpoints and config still match.
-    ADDED = {"pendulum_scenes": 0, "box_scenes": 0, "init": "", "freeze_trunk": False}
+    ADDED = {"pendulum_scenes": 0, "box_scenes": 0, "init": "", "freeze_trunk": False, "scene": ""}
 
     def identity(self) -> dict:
         d = {k: getattr(self, k) for k in self.IDENTITY}
@@ -102,13 +111,15 @@ def check_config(cfg: PretrainConfig) -> None:
     for name in ("pendulum_scenes", "box_scenes"):
         if getattr(cfg, name) < 0:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(cfg, name)}")
+    if cfg.scene and (cfg.pendulum_scenes or cfg.box_scenes):
+        raise ValueError("--scene learns your own scene's objects; --pendulum-scenes and --box-scenes are zsrm's scenes")
     if cfg.freeze_trunk and not cfg.init:
         raise ValueError("--freeze-trunk keeps the trunk of the VLM named by --init "
                          "(e.g. --init zsrm/vlm/weights/scene); a frozen random trunk would learn nothing")
     # Each setting that makes another VLM than the shipped one, and an --out to suggest for it.
     other_vlm = {"--pendulum-scenes": (cfg.pendulum_scenes, "runs/vlm-pendulum"),
                  "--box-scenes": (cfg.box_scenes, "runs/vlm-box"), "--init": (cfg.init, "runs/vlm-box"),
-                 "--freeze-trunk": (cfg.freeze_trunk, "runs/vlm-box")}
+                 "--freeze-trunk": (cfg.freeze_trunk, "runs/vlm-box"), "--scene": (cfg.scene, "runs/vlm-own-scene")}
     for flag, (value, example) in other_vlm.items():
         if value and Path(cfg.out).resolve() == SHIPPED_SCENE_DIR.resolve():
             raise ValueError(f"{flag} trains another VLM than the shipped one: name its folder with --out "
@@ -156,8 +167,11 @@ def learning_rate(step: int, cfg: PretrainConfig) -> float:
 
 
 def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfig, pendulum: dict | None = None,
-               box: dict | None = None):
+               box: dict | None = None, objects: tuple[str, ...] | None = None):
     """Images (uint8 NHWC) and captions of one step, a pure function of (seed, step).
+
+    ``objects``: the phrases of a user's own scene, in the order of ``data["visible"]``'s columns
+    (the renders are that scene's; its captions name them).
 
     ``pendulum``: pendulum renders (:func:`zsrm.data.pendulum_renders.render_pendulum_scenes`);
     ``box``: box renders (:func:`zsrm.data.box_renders.render_box_scenes`), every row with
@@ -167,8 +181,11 @@ def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfi
     if pendulum is not None or box is not None:
         return _mixed_batch(data, train_rows, rng, cfg, pendulum, box)
     rows = train_rows[rng.choice(len(train_rows), min(cfg.batch_size, len(train_rows)), replace=False)]
-    captions = [presence_caption(visible_colours(data["visible"][r], cfg.image_size), SHAPES[data["shape"][r]], rng)
-                for r in rows]
+    if objects is not None:
+        captions = [phrases_caption(visible_names(data["visible"][r], objects, cfg.image_size), rng) for r in rows]
+    else:
+        captions = [presence_caption(visible_colours(data["visible"][r], cfg.image_size), SHAPES[data["shape"][r]],
+                                     rng) for r in rows]
     images = data["images"][rows]
     # Mirror half the images: presence does not depend on left and right, captions never say where.
     flip = rng.random(len(rows)) < 0.5
@@ -228,7 +245,7 @@ def _load_checkpoint(folder: Path, cfg: PretrainConfig):
 
 
 def _provenance(cfg: PretrainConfig, train_images: int, log: list[dict], pendulum: dict | None,
-                box: dict | None = None) -> dict:
+                box: dict | None = None, objects: tuple[str, ...] | None = None) -> dict:
     """What the saved model's config.json says about its training (the pendulum's, the box's,
     ``init`` and ``freeze_trunk`` only if used)."""
     meta = {
@@ -248,14 +265,19 @@ def _provenance(cfg: PretrainConfig, train_images: int, log: list[dict], pendulu
         meta["init"] = cfg.init
     if cfg.freeze_trunk:
         meta["freeze_trunk"] = True
+    if objects is not None:  # what it learnt to name (from the simulator's object list), in place of the colours
+        meta.pop("colours")
+        meta.update({"scene": cfg.scene, "objects": list(objects)})
     return meta
 
 
 def _check_renders(cfg: PretrainConfig, data: dict, pendulum: dict | None,
-                   box: dict | None) -> tuple[dict | None, dict | None]:
+                   box: dict | None, objects: tuple[str, ...] | None = None) -> tuple[dict | None, dict | None]:
     """The pendulum and box renders a run of ``cfg`` trains on (the first ``pendulum_scenes``
     and ``box_scenes`` scenes; of the box's, the images with something to name), checked."""
     check_config(cfg)
+    if bool(cfg.scene) != (objects is not None):
+        raise ValueError(f"scene is {cfg.scene!r} but the objects of its renders were {'not ' if objects is None else ''}given")
     for name, scenes, renders in (("pendulum", cfg.pendulum_scenes, pendulum), ("box", cfg.box_scenes, box)):
         if bool(scenes) != (renders is not None):
             raise ValueError(f"{name}_scenes is {scenes} but {name} renders were "
@@ -273,24 +295,34 @@ def _check_renders(cfg: PretrainConfig, data: dict, pendulum: dict | None,
     return pendulum, box
 
 
+def _captions_to_encode(pendulum, box, objects) -> list[str]:
+    """Every caption a run can draw, encoded once up front (none for too many own objects)."""
+    if objects is not None:
+        return all_phrases_captions(objects)
+    return ([c for s in SHAPES for c in all_presence_captions(s)] + (all_pendulum_captions() if pendulum is not None else [])
+            + (all_box_captions() if box is not None else []))
+
+
 def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True, pendulum: dict | None = None,
-             box: dict | None = None) -> SceneVLM:
+             box: dict | None = None, objects: tuple[str, ...] | None = None) -> SceneVLM:
     """Train (or resume training) a scene VLM on renders ``data`` (see
     :func:`zsrm.data.renders.render_presence_scenes`) and save it to ``cfg.out``; with
     ``cfg.pendulum_scenes``, also on the pendulum renders ``pendulum`` (see
     :func:`zsrm.data.pendulum_renders.render_pendulum_scenes`); with ``cfg.box_scenes``, also
-    on the box renders ``box`` (see :func:`zsrm.data.box_renders.render_box_scenes`)."""
+    on the box renders ``box`` (see :func:`zsrm.data.box_renders.render_box_scenes`); with
+    ``cfg.scene``, ``data`` are that scene's renders (:mod:`zsrm.data.own_renders`), ``objects`` its phrases."""
     from tqdm import tqdm
 
-    pendulum, box = _check_renders(cfg, data, pendulum, box)
-    extra = {name: renders for name, renders in (("pendulum", pendulum), ("box", box)) if renders is not None}
+    pendulum, box = _check_renders(cfg, data, pendulum, box, objects)
+    extra = {name: renders for name, renders in (("pendulum", pendulum), ("box", box), ("objects", objects))
+             if renders is not None}
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
-    work = Path(cfg.workdir)
-    ckpt = work / "checkpoint"
+    work, ckpt = Path(cfg.workdir), Path(cfg.workdir) / "checkpoint"
     work.mkdir(parents=True, exist_ok=True)
     # Images in which nothing is visible (all objects hidden or fallen) have no true caption.
-    train_rows = np.array([r for r in range(len(data["images"])) if visible_colours(data["visible"][r], cfg.image_size)])
+    names = COLOURS if objects is None else objects
+    train_rows = np.array([r for r in range(len(data["images"])) if visible_names(data["visible"][r], names, cfg.image_size)])
 
     if ckpt.exists() and (ckpt / "state.json").exists():
         model, opt, start, log = _load_checkpoint(ckpt, cfg)
@@ -300,9 +332,9 @@ def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True, pendulum: d
         opt, start, log = _optimizer(model, cfg), 0, []
     model.train()
     # Encode every possible caption once: the frozen sentence encoder then never runs again.
-    model.sentence_features([c for s in SHAPES for c in all_presence_captions(s)]
-                            + (all_pendulum_captions() if pendulum is not None else [])
-                            + (all_box_captions() if box is not None else []))
+    texts = _captions_to_encode(pendulum, box, objects)
+    if texts:
+        model.sentence_features(texts)
 
     t0, elapsed_before = time.time(), (log[-1]["seconds"] if log else 0.0)
     bar = tqdm(total=cfg.steps, initial=start, desc="pretrain scene VLM", unit="step", disable=not progress)
@@ -324,7 +356,7 @@ def pretrain(cfg: PretrainConfig, data: dict, progress: bool = True, pendulum: d
     bar.close()
 
     model.eval()
-    model.meta = _provenance(cfg, len(train_rows), log, pendulum, box)
+    model.meta = _provenance(cfg, len(train_rows), log, pendulum, box, objects)
     model.save(cfg.out)
     with atomic_path(work / "log.csv") as tmp, open(tmp, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=["step", "loss", "seconds"])
