@@ -76,28 +76,71 @@ def presence_eval(vlm: VisionLanguageModel, n_images: int = 500, seed: int = 0, 
     return result, {"scores": scores, "present": present, "used": used}
 
 
+def own_presence_eval(vlm: VisionLanguageModel, scene: str, n_images: int = 500, seed: int = 0,
+                      image_size: int = 64, progress: bool = True) -> tuple[dict, dict]:
+    """:func:`presence_eval` on held-out renders of a user's own scene (``scene``: its adapter,
+    ``module:Class`` or a registered id): per object, AUROC of its phrase's probe ("a red mug")
+    scored against the other objects' probes, against whether it is visible. Truth, as for
+    zsrm's scenes, from the simulator (the adapter's privileged accessor and segmentation)."""
+    import torch
+    from tqdm import tqdm
+
+    from zsrm.data.own_renders import render_own_scenes
+    from zsrm.envs.adapter import ROLES, load_adapter
+    from zsrm.vlm.presence import phrase_probe
+
+    adapter = load_adapter(scene)
+    objects, n_scenes = tuple(adapter.objects), math.ceil(n_images / len(ROLES))
+    with tqdm(total=n_scenes, desc="render held-out scenes", unit="scene", disable=not progress) as bar:
+        data = render_own_scenes(adapter, range(n_scenes), seed=seed, stream="eval", size=image_size,
+                                 progress=bar.update)
+    data = {k: v[:n_images] for k, v in data.items()}
+    with torch.no_grad():
+        probes = vlm.encode_texts([phrase_probe(p) for p in objects])
+        sims = torch.cat([vlm.encode_images(data["images"][lo:lo + 256]) @ probes.T
+                          for lo in range(0, len(data["images"]), 256)]).cpu().numpy()
+    scores = sims - (sims.sum(axis=1, keepdims=True) - sims) / max(1, len(objects) - 1)
+    present, absent = data["visible"] >= min_visible_pixels(image_size), data["visible"] == 0
+    used = present | absent
+    result: dict = {f"auroc.{p}": round(auroc(scores[used[:, j], j], present[used[:, j], j]), 4)
+                    for j, p in enumerate(objects)}
+    result["meta"] = {
+        "scene": adapter.name, "objects": list(objects), "n_images": int(n_images), "n_scenes": int(n_scenes),
+        "cameras": dict(adapter.roles), "image_size": image_size, "seed": seed,
+        "held_out": "the own scene's eval seed stream; training renders use its train stream",
+        "score": "cos(image, 'a PHRASE') minus the mean cos of the other objects' probes",
+        "counts": {p: {"present": int(present[:, j].sum()), "absent": int(absent[:, j].sum())}
+                   for j, p in enumerate(objects)},
+        "vlm": getattr(vlm, "meta", {}) if vlm.backend == "scene" else {"pretrained": getattr(vlm, "pretrained", None)},
+        "machine": platform.platform(),
+    }
+    return result, {"scores": scores, "present": present, "used": used}
+
+
 def plot_presence(arrays: dict, result: dict, path: Path) -> Path:
     """ROC curves per colour (left) and score histograms, present against absent (right)."""
     plt = pyplot()
     from sklearn.metrics import roc_curve
 
     colours = {"red": "#d62728", "green": "#2ca02c", "yellow": "#e6b800", "blue": "#1f77b4"}
+    names = result["meta"].get("objects") or COLOURS  # an own scene's phrases, or the colours
     fig, (ax_roc, ax_hist) = plt.subplots(1, 2, figsize=(10, 4.2))
-    for j, c in enumerate(COLOURS):
-        m = arrays["used"][:, j]
+    for j, c in enumerate(names):
+        m, colour = arrays["used"][:, j], colours.get(c, colours.get(c.split()[0], f"C{j}"))
         truth, score = arrays["present"][m, j], arrays["scores"][m, j]
         if truth.any() and not truth.all():
             fpr, tpr, _ = roc_curve(truth, score)
-            ax_roc.plot(fpr, tpr, color=colours[c], label=f"{c}: AUROC {result[f'auroc.{c}']:.3f}")
-        ax_hist.hist(score[truth], bins=30, alpha=0.45, color=colours[c], histtype="stepfilled")
-        ax_hist.hist(score[~truth], bins=30, color=colours[c], histtype="step", linestyle="--")
+            ax_roc.plot(fpr, tpr, color=colour, label=f"{c}: AUROC {result[f'auroc.{c}']:.3f}")
+        ax_hist.hist(score[truth], bins=30, alpha=0.45, color=colour, histtype="stepfilled")
+        ax_hist.hist(score[~truth], bins=30, color=colour, histtype="step", linestyle="--")
     ax_roc.plot([0, 1], [0, 1], color="grey", lw=0.8, ls=":")
     ax_roc.set(xlabel="false positive rate", ylabel="true positive rate", title="zero-shot presence (ROC)")
     ax_roc.legend(loc="lower right")
-    ax_hist.set(xlabel="score: cos(probe) - mean cos(other colours)", ylabel="images",
+    ax_hist.set(xlabel="score: cos(probe) - mean cos(the other probes)", ylabel="images",
                 title="filled: object visible, dashed: absent")
-    n = result["meta"]["n_images"]
-    fig.suptitle(f"scene VLM presence probes on {n} held-out renders (3 cameras, blocks and pucks)", fontsize=10)
+    n, scene = result["meta"]["n_images"], result["meta"].get("scene")
+    fig.suptitle(f"scene VLM presence probes on {n} held-out renders (3 cameras, "
+                 f"{'of ' + scene if scene else 'blocks and pucks'})", fontsize=10)
     return save_figure(fig, path)
 
 

@@ -90,19 +90,25 @@ class EvalVlm:
     seed: int = 0  # seed of the held-out (eval) stream
     out: str | None = None  # JSON path, e.g. results/vlm_presence.json (a PNG is written beside it)
     min_auroc: float = 0.95  # exit 1 if any colour falls below this
+    scene: str = ""  # your own scene (module:Class or a registered id): its objects on its held-out renders
     quiet: bool = False  # no progress bars
 
     def run(self) -> int:
-        from zsrm.evaluation.vlm_presence import presence_eval, write_presence_results
+        from zsrm.evaluation.vlm_presence import own_presence_eval, presence_eval, write_presence_results
         from zsrm.vlm import load_vlm
 
         if self.images < 10:
             raise ValueError("--images must be at least 10")
         if self.out:
             files.check_writable(self.out)
-        result, arrays = presence_eval(load_vlm(self.vlm), n_images=self.images, seed=self.seed,
-                                       progress=not self.quiet)
+        if self.scene:
+            result, arrays = own_presence_eval(load_vlm(self.vlm), self.scene, n_images=self.images, seed=self.seed,
+                                               progress=not self.quiet)
+        else:
+            result, arrays = presence_eval(load_vlm(self.vlm), n_images=self.images, seed=self.seed,
+                                           progress=not self.quiet)
         command = ["zsrm", "eval-vlm", "--vlm", self.vlm, "--images", str(self.images), "--seed", str(self.seed)]
+        command += ["--scene", self.scene] if self.scene else []
         result["meta"]["command"] = shlex.join(command + (["--out", str(self.out)] if self.out else []))
         print(json.dumps({k: v for k, v in result.items() if k.startswith("auroc.")}, indent=2))
         if self.out:
