@@ -248,3 +248,58 @@ def test_no_zsrm_source_names_the_examples_objects():
     files = [p for p in (ROOT / "zsrm").rglob("*") if p.is_file() and p.suffix in (".py", ".json", ".xml", ".md")]
     bad = [f"{p.relative_to(ROOT)}: {w!r}" for p in files for w in words if w in p.read_text(errors="ignore")]
     assert not bad, bad
+
+
+# --- the scene VLM learns the scene's object names --------------------------------------------
+def test_own_renders_count_each_objects_visible_pixels():
+    from zsrm.data.own_renders import render_own_scenes
+
+    data = render_own_scenes(load_adapter(SPEC), range(6), seed=0, size=32)
+    assert data["images"].shape == (18, 32, 32, 3) and data["visible"].shape == (18, 4)
+    assert (data["visible"][~data["in_scene"]] == 0).all()  # what is not in the scene shows nothing
+    assert (data["visible"][data["in_scene"]] > 0).mean() > 0.9  # what is, shows (unless hidden behind another)
+    again = render_own_scenes(load_adapter(SPEC), [3], seed=0, size=32)
+    assert np.array_equal(again["images"], data["images"][9:12])  # scene 3 is the same scene on its own
+
+
+def test_captions_name_only_visible_objects_by_their_phrases():
+    from zsrm.vlm.pretrain import PretrainConfig, make_batch
+
+    objects = tuple(BODIES)
+    visible = np.array([[50, 0, 3, 40], [0, 30, 0, 0]])
+    data = {"images": np.zeros((2, 8, 8, 3), np.uint8), "visible": visible}
+    cfg = PretrainConfig(out="unused", scene=SPEC, batch_size=2, image_size=64)
+    seen = set()
+    for step in range(20):
+        _, captions = make_batch(data, np.arange(2), step, cfg, objects=objects)
+        seen.update(captions)
+    assert seen <= {"a red cylinder", "a wooden bowl", "a red cylinder and a wooden bowl",
+                    "a wooden bowl and a red cylinder", "a purple cylinder"}
+    assert "a purple cylinder" in seen and len(seen) >= 4
+
+
+def test_pretrain_vlm_on_the_example_scene_names_its_objects(tmp_path, capsys):
+    out, work = tmp_path / "vlm", tmp_path / "work"
+    args = ["pretrain-vlm", "--scene", SPEC, "--out", str(out), "--workdir", str(work), "--arch", "tiny",
+            "--scenes", "4", "--shard-size", "2", "--steps", "4", "--batch-size", "8", "--checkpoint-every", "2",
+            "--warmup-steps", "2", "--quiet"]
+    assert main(args) == 0
+    meta = json.loads((out / "config.json").read_text())["meta"]
+    assert meta["objects"] == list(BODIES) and meta["scene"] == SPEC and "colours" not in meta
+    assert meta["config"]["scene"] == SPEC and meta["train_scenes"] == 4
+    assert sorted(p.name for p in (work / "own-renders").glob("shard-*.npz")) == ["shard-0000.npz", "shard-0001.npz"]
+    capsys.readouterr()
+    assert main(["eval-vlm", "--vlm", str(out), "--scene", SPEC, "--images", "30", "--min-auroc", "0",
+                 "--out", str(tmp_path / "presence.json"), "--quiet"]) == 0
+    result = json.loads((tmp_path / "presence.json").read_text())
+    assert sorted(k for k in result if k.startswith("auroc.")) == sorted(f"auroc.{p}" for p in BODIES)
+    assert (tmp_path / "presence.png").exists()
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--box-scenes", "2", "--out", "x"], "--pendulum-scenes and --box-scenes are zsrm's scenes"),
+    ([], "--scene trains another VLM than the shipped one: name its folder with --out"),
+])
+def test_pretrain_vlm_scene_refuses_what_does_not_fit(extra, words, capsys):
+    assert main(["pretrain-vlm", "--scene", SPEC, *extra]) == 2
+    assert words in capsys.readouterr().err
