@@ -256,7 +256,7 @@ def collect_own_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None)
     try:
         while row < n:
             objects = cfg.objects
-            if adapter.subsets:
+            if adapter.holds_subsets:
                 chosen = set(rng.choice(cfg.colours, int(rng.integers(cfg.min_objects, cfg.max_objects + 1)),
                                         replace=False).tolist())
                 objects = tuple(o for o in cfg.objects if o in chosen)

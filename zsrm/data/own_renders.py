@@ -30,7 +30,7 @@ def own_scene_plan(adapter: SceneAdapter, index: int, seed: int, stream: str = "
     can leave some out), the env's seed, the exploration actions' generator and their number."""
     rng = np.random.default_rng([STREAMS[stream], seed, index])
     objects = tuple(adapter.objects)
-    if adapter.subsets:
+    if adapter.holds_subsets:
         k = int(rng.integers(1, len(objects) + 1))
         chosen = set(rng.choice(len(objects), k, replace=False).tolist())
         objects = tuple(o for i, o in enumerate(adapter.objects) if i in chosen)

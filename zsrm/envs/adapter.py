@@ -4,8 +4,9 @@ was not built for (see docs/own-scene.md).
 An adapter says, for one gymnasium env:
 
 * which env: :attr:`SceneAdapter.env_id` (a registered gymnasium id, made with
-  :meth:`SceneAdapter.make_env`), and optionally :attr:`SceneAdapter.xml`, its MuJoCo XML, whose
-  cameras are checked before any env is built;
+  :meth:`SceneAdapter.make_env`), or :attr:`SceneAdapter.xml` alone, a MuJoCo XML that zsrm
+  turns into an env (:class:`zsrm.envs.xml_scene.XmlSceneEnv`: its cameras' pixels in, actuator
+  controls out); an XML given with an ``env_id`` has its cameras checked before any env is built;
 * what is in it: :attr:`SceneAdapter.objects`, one noun phrase per object ("red mug",
   "blue plate"), the words goals and captions will use;
 * which of its cameras play Table 1's roles: :attr:`SceneAdapter.cameras`, ``{"front": ...,
@@ -14,7 +15,7 @@ An adapter says, for one gymnasium env:
 * where exploration actions come from: :meth:`SceneAdapter.exploration_action` (uniform
   random by default);
 * one privileged accessor, :meth:`SceneAdapter.object_positions`: the objects' true world
-  positions. ONLY the oracle, evaluation, and the scene stand-in VLM's presence-caption
+  positions (by default those of the bodies :attr:`SceneAdapter.bodies` names). ONLY the oracle, evaluation, and the scene stand-in VLM's presence-caption
   pretraining may call it. No reward model and no policy ever reads it: they get the
   cameras' images.
 
@@ -68,22 +69,29 @@ class SceneAdapter:
     The default :meth:`make_env` calls ``gym.make(env_id, cameras=..., image_size=...,
     objects=..., **env_kwargs)``: an env that takes the camera names to observe, a square image
     side and which objects to hold, and observes a dict ``{camera name: (size, size, 3) uint8
-    image}``. Override :meth:`make_env` (and :meth:`observe`) for an env that is built or
-    observes otherwise.
+    image}``; without an ``env_id``, it builds an :class:`~zsrm.envs.xml_scene.XmlSceneEnv` of
+    ``xml`` (``env_kwargs``: its ``frame_skip`` and ``jitter``), which always holds every object.
+    Override :meth:`make_env` (and :meth:`observe`) for an env that is built or observes otherwise.
     """
 
     env_id: str | None = None  # a registered gymnasium id
-    xml: str | None = None  # the scene's MuJoCo XML (optional): its cameras are checked before an env is built
-    env_kwargs: Mapping = {}  # further keywords of gym.make
+    xml: str | None = None  # the scene's MuJoCo XML: the env itself when there is no env_id, else its cameras are checked early
+    env_kwargs: Mapping = {}  # further keywords of gym.make (or of XmlSceneEnv)
     objects: tuple[str, ...] = ()  # a noun phrase per object, as goals will name them
     cameras: Mapping[str, str] = {}  # Table 1 role (front, left, tilted) -> the env's camera name
+    bodies: Mapping[str, str] = {}  # PRIVILEGED, optional: phrase -> the MuJoCo body whose position is the object's
     object_width: float = 0.06  # a typical object's width in metres (the labeler's pixel scale)
-    subsets: bool = True  # the env can hold any subset of the objects (scenes with fewer of them)
+    subsets: bool | None = None  # the env can hold any subset of the objects (None: yes with an env_id, no for a bare XML)
 
     @property
     def name(self) -> str:
         """How messages and dataset manifests name this adapter: ``module:Class``."""
         return f"{type(self).__module__}:{type(self).__qualname__}"
+
+    @property
+    def holds_subsets(self) -> bool:
+        """Can a scene hold only some of the objects (exploration scenes with fewer of them)?"""
+        return bool(self.env_id) if self.subsets is None else bool(self.subsets)
 
     @property
     def roles(self) -> dict[str, str]:
@@ -97,10 +105,15 @@ class SceneAdapter:
     def make_env(self, cameras: tuple[str, ...], image_size: int = 64, objects: tuple[str, ...] | None = None) -> gym.Env:
         """An env observing ``cameras`` (the env's own camera names) at ``image_size``, holding
         ``objects`` (phrases; all of them when None or when the env cannot hold fewer)."""
+        if not self.env_id and self.xml:
+            from zsrm.envs.xml_scene import XmlSceneEnv
+
+            env = XmlSceneEnv(self.xml, cameras=tuple(cameras), image_size=int(image_size), **self.env_kwargs)
+            return gym.wrappers.TimeLimit(env, max_episode_steps=100)
         if not self.env_id:
-            raise SceneAdapterError(f"{self.name}: give env_id (a gymnasium id), or override make_env")
+            raise SceneAdapterError(f"{self.name}: give env_id (a gymnasium id) or xml, or override make_env")
         kwargs = dict(self.env_kwargs, cameras=tuple(cameras), image_size=int(image_size))
-        if self.subsets:
+        if self.holds_subsets:
             kwargs["objects"] = self.env_objects(tuple(self.objects if objects is None else objects))
         try:
             return gym.make(self.env_id, **kwargs)
@@ -119,8 +132,14 @@ class SceneAdapter:
     def object_positions(self, env: gym.Env) -> dict[str, np.ndarray]:
         """PRIVILEGED: the true world position (x, y, z) of every object the scene holds, keyed
         by phrase. Only the oracle, evaluation and the scene stand-in VLM's presence-caption
-        pretraining call it; never a reward model or a policy."""
-        raise NotImplementedError(f"{self.name}: write object_positions(env), the privileged accessor")
+        pretraining call it; never a reward model or a policy. The default reads the positions of
+        the bodies :attr:`bodies` names, every object's (for scenes that hold all of them)."""
+        if not self.bodies:
+            raise NotImplementedError(f"{self.name}: name each object's body in bodies, or write "
+                                      "object_positions(env), the privileged accessor")
+        base = env.unwrapped
+        return {p: base.data.xpos[mujoco.mj_name2id(base.model, mujoco.mjtObj.mjOBJ_BODY, b)].copy()
+                for p, b in self.bodies.items()}
 
 
 # --- checks ---------------------------------------------------------------------------------
@@ -133,6 +152,9 @@ def check_adapter(adapter: SceneAdapter) -> SceneAdapter:
     if not (isinstance(adapter.object_width, (int, float)) and adapter.object_width > 0):
         raise SceneAdapterError(f"{adapter.name}: object_width must be a positive number of metres, "
                                 f"got {adapter.object_width!r}")
+    if adapter.bodies and set(adapter.bodies) != set(adapter.objects):
+        raise SceneAdapterError(f"{adapter.name}: bodies must name a body for each object and only those; "
+                                f"objects: {', '.join(adapter.objects)}; bodies: {', '.join(adapter.bodies)}")
     if adapter.xml is not None:
         try:
             model = mujoco.MjModel.from_xml_path(str(adapter.xml))
@@ -140,6 +162,7 @@ def check_adapter(adapter: SceneAdapter) -> SceneAdapter:
             raise SceneAdapterError(f"{adapter.name}: cannot load xml {adapter.xml}: "
                                     f"{str(err).splitlines()[0] if str(err) else err}") from None
         check_model_cameras(adapter, model)
+        check_model_bodies(adapter, model)
     return adapter
 
 
@@ -199,6 +222,13 @@ def check_model_cameras(adapter: SceneAdapter, model: mujoco.MjModel) -> None:
                                     f"the model; its cameras: {', '.join(names) or 'none'}")
 
 
+def check_model_bodies(adapter: SceneAdapter, model: mujoco.MjModel) -> None:
+    """Every body :attr:`SceneAdapter.bodies` names is a body of the MuJoCo model."""
+    for phrase, body in adapter.bodies.items():
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body) < 0:
+            raise SceneAdapterError(f"{adapter.name}: the body {body!r} of {phrase!r} is not a body of the model")
+
+
 def check_env(adapter: SceneAdapter, env: gym.Env, roles=ROLES) -> gym.Env:
     """An env of the adapter: its MuJoCo model has the roles' cameras (MuJoCo envs are the
     ones whose true pixels zsrm can compute), and it observes the camera of each of ``roles``
@@ -208,6 +238,7 @@ def check_env(adapter: SceneAdapter, env: gym.Env, roles=ROLES) -> gym.Env:
         raise SceneAdapterError(f"{adapter.name}: {type(env.unwrapped).__name__} has no MuJoCo model "
                                 "(env.unwrapped.model): zsrm projects true positions through its cameras")
     check_model_cameras(adapter, model)
+    check_model_bodies(adapter, model)
     space = env.observation_space
     if not isinstance(space, gym.spaces.Dict):
         raise SceneAdapterError(f"{adapter.name}: the env observes {space}, not camera images; zsrm reads "
@@ -271,5 +302,5 @@ def load_adapter(scene: "str | SceneAdapter | type[SceneAdapter]") -> SceneAdapt
     return check_adapter(scene)
 
 
-__all__ = ["ROLES", "SceneAdapter", "SceneAdapterError", "check_adapter", "check_env", "check_model_cameras",
-           "check_phrases_known", "load_adapter", "register_scene", "registered_scenes"]
+__all__ = ["ROLES", "SceneAdapter", "SceneAdapterError", "check_adapter", "check_env", "check_model_bodies",
+           "check_model_cameras", "check_phrases_known", "load_adapter", "register_scene", "registered_scenes"]
