@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # the example lives beside zsrm, as a user's code would
     sys.path.insert(0, str(ROOT))
 
-from examples.own_scene.adapter import BODIES, OwnScene  # noqa: E402
+from examples.own_scene.adapter import BODIES, OwnScene, OwnSceneFromXml  # noqa: E402
 from examples.own_scene.env import OwnSceneEnv  # noqa: E402
 from zsrm.cli import main  # noqa: E402
 from zsrm.data.collect import CollectConfig, collect  # noqa: E402
@@ -53,6 +53,8 @@ def _one_line(err: Exception) -> str:
     ({"objects": ("red cylinder", "red cylinder")}, "'red cylinder' is named more than once"),
     ({"object_width": 0}, "object_width must be a positive number"),
     ({"xml": "/no/such/scene.xml"}, "cannot load xml /no/such/scene.xml"),
+    ({"bodies": {"red cylinder": "red_cylinder"}}, "bodies must name a body for each object and only those"),
+    ({"bodies": {**BODIES, "wooden bowl": "pot"}}, "the body 'pot' of 'wooden bowl' is not a body of the model"),
 ])
 def test_a_bad_adapter_is_one_line(attrs, words):
     with pytest.raises(SceneAdapterError) as err:
@@ -90,6 +92,13 @@ def test_an_env_that_does_not_observe_a_role_is_one_line():
     with pytest.raises(SceneAdapterError) as err:
         check_env(adapter, OwnSceneEnv(cameras=("cam_front", "cam_side"), image_size=16))
     assert "observes nothing for camera 'cam_high' (the 'tilted' role)" in _one_line(err.value)
+
+
+def test_an_adapter_with_no_env_is_one_line():
+    adapter = load_adapter(_adapter(env_id=None, xml=None))
+    with pytest.raises(SceneAdapterError) as err:
+        adapter.make_env(("cam_front",))
+    assert "give env_id (a gymnasium id) or xml, or override make_env" in _one_line(err.value)
 
 
 def test_unknown_phrases_are_one_line():
@@ -219,6 +228,25 @@ def test_stages_that_do_not_take_an_own_scene_yet_say_so_in_one_line(tmp_path, c
     assert main(["label", str(tmp_path / "own"), "--vlm", "scene"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"holds data of your own scene ({SPEC}); zsrm label does not take" in err[0]
+
+
+def test_a_scene_from_its_xml_alone(tmp_path):
+    """No env of the user's: zsrm builds one from the MJCF; positions from the bodies named."""
+    from gymnasium.utils.env_checker import check_env as gym_check
+
+    adapter = load_adapter(OwnSceneFromXml)
+    assert adapter.env_id is None and not adapter.holds_subsets
+    env = adapter.make_env(tuple(adapter.roles.values()), 32)
+    gym_check(env.unwrapped)
+    check_env(adapter, env)
+    spec = "examples.own_scene.adapter:OwnSceneFromXml"
+    data = collect(CollectConfig(scene=spec, images=4, shard_size=4, episode_steps=4, record_every=2,
+                                 image_size=32), tmp_path / "xml", progress=False).load()
+    assert data["present"].all()  # an XML scene holds all its objects
+    starts = data["positions"][::2, :, :2]  # the reset moved them (jitter 0.1 m), within the table
+    assert not np.allclose(starts[0], starts[1]) and (np.abs(starts) < 0.3).all()
+    for role in ROLES:
+        assert ((data[f"pixels_{role}"] > 0) & (data[f"pixels_{role}"] < 31)).all()
 
 
 def test_zsrms_own_collect_config_is_unchanged():

@@ -34,3 +34,17 @@ class OwnScene(SceneAdapter):
         """Privileged: read from the simulator, for the oracle and evaluation only."""
         base = env.unwrapped
         return {p: base.body_position(BODIES[p]) for p in self.objects if BODIES[p] in base.objects}
+
+
+class OwnSceneFromXml(SceneAdapter):
+    """The same scene from its MuJoCo XML alone, with no env of one's own: zsrm builds the env
+    (camera images in, the actuators' controls out: here the pusher's target position), and
+    reads the objects' positions from the bodies named here (privileged). Every scene holds all
+    four objects; a reset moves each by up to ``jitter`` metres."""
+
+    xml = str(Path(__file__).with_name("scene.xml"))
+    env_kwargs = {"jitter": 0.1}
+    objects = tuple(BODIES)
+    bodies = BODIES
+    cameras = {"front": "cam_front", "left": "cam_side", "tilted": "cam_high"}
+    object_width = 0.05
