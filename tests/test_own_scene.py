@@ -130,6 +130,18 @@ def test_a_registered_id_names_an_adapter():
         register_scene("a:b", SPEC)
 
 
+def test_an_installed_package_names_an_adapter_by_entry_point(monkeypatch):
+    from importlib.metadata import EntryPoint
+
+    import zsrm.envs.adapter as adapter_mod
+
+    points = [EntryPoint("lab-pusher", SPEC, adapter_mod.ENTRY_POINT_GROUP)]
+    monkeypatch.setattr(adapter_mod, "entry_points", lambda group: points if group == "zsrm.scenes" else [])
+    assert isinstance(load_adapter("lab-pusher"), OwnScene)
+    with pytest.raises(SceneAdapterError, match="registered id .*lab-pusher"):
+        load_adapter("lab-pushr")
+
+
 def test_the_command_line_prints_a_bad_scene_as_one_line(tmp_path, capsys):
     assert main(["collect", "--scene", "nowhere_at_all.scenes:Mugs", "--out", str(tmp_path / "d")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -144,12 +156,14 @@ def test_the_adapter_docstring_runs():
 
 
 # --- the example scene ----------------------------------------------------------------------
-def test_the_example_env_passes_gymnasiums_checks():
+def test_the_example_env_passes_gymnasiums_and_sb3s_checks():
     from gymnasium.utils.env_checker import check_env as gym_check
+    from stable_baselines3.common.env_checker import check_env as sb3_check
 
     adapter = load_adapter(SPEC)
     env = adapter.make_env(tuple(adapter.roles.values()), 64)
     gym_check(env.unwrapped)
+    sb3_check(env.unwrapped)
     assert check_env(adapter, env) is env
 
 
