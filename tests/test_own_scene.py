@@ -228,6 +228,19 @@ def test_a_tiny_collect_from_the_example_scene_resumes(tmp_path):
         collect(_tiny(seed=1), tmp_path / "a", progress=False)
 
 
+def test_an_accessor_that_names_an_unknown_object_is_one_line(tmp_path):
+    class Misnamed(OwnScene):
+        def object_positions(self, env):
+            return {"red cylindre": np.zeros(3)}
+
+    with pytest.raises(ValueError, match="scene must be module:Class or a registered id, got Misnamed"):
+        CollectConfig(scene=Misnamed())
+    register_scene("test-misnamed", Misnamed)
+    with pytest.raises(SceneAdapterError, match="unknown object 'red cylindre'; this scene's objects"):
+        collect(CollectConfig(scene="test-misnamed", images=1, shard_size=1, episode_steps=1, record_every=1),
+                tmp_path / "d", progress=False)
+
+
 def test_collect_from_the_command_line(tmp_path, capsys):
     out = tmp_path / "own"
     assert main(["collect", "--scene", SPEC, "--out", str(out), "--images", "2", "--shard-size", "2",

@@ -92,6 +92,9 @@ class CollectConfig:
         """The adapter that ``scene`` names; the dataset's one scene is then the adapter's name."""
         from zsrm.envs.adapter import load_adapter
 
+        if not isinstance(self.scene, str):  # the manifest records it: a name, not an object
+            raise ValueError(f"scene must be module:Class or a registered id, got {type(self.scene).__name__}; "
+                             "name an adapter class with zsrm.envs.register_scene")
         if self.scenes not in (("tabletop",), (self.scene,)):
             raise ValueError(f"give --scene (your own scene) or --scenes (zsrm's: {', '.join(SCENE_IDS)}), not both")
         if self.p_hold or self.p_box:
@@ -286,7 +289,11 @@ def _record_own(out: dict, row: int, cfg: CollectConfig, env, obs) -> None:
     images = adapter.observe(obs)
     for role in cfg.cameras:
         out[f"images_{role}"][row] = images[role]
-    for phrase, xyz in adapter.object_positions(env).items():
+    from zsrm.envs.adapter import check_phrases_known
+
+    positions = adapter.object_positions(env)
+    check_phrases_known(adapter, positions)  # a key that is no phrase of the adapter: one line, not an IndexError
+    for phrase, xyz in positions.items():
         i = cfg.objects.index(phrase)
         out["positions"][row, i] = xyz
         out["present"][row, i] = True

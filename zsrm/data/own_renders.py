@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 
 from zsrm.data.renders import load_cached_shards
-from zsrm.envs.adapter import ROLES, SceneAdapter, check_env
+from zsrm.envs.adapter import ROLES, SceneAdapter, check_env, check_phrases_known
 
 STREAMS = {"train": 2, "eval": 3}  # seed streams, apart from zsrm's renders' (0, 1)
 
@@ -118,6 +118,7 @@ def _render_one(adapter: SceneAdapter, env, seg: _Segmenter, plan: dict, out: di
             break
     images = adapter.observe(obs)
     positions = adapter.object_positions(env)  # privileged: which objects there are, for the captions
+    check_phrases_known(adapter, positions)
     out["images"][rows] = np.stack([images[r] for r in ROLES])
     out["visible"][rows] = np.stack([seg.visible(adapter.roles[r], positions, objects) for r in ROLES])
     out["in_scene"][rows] = [o in positions for o in objects]
