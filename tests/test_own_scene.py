@@ -101,6 +101,15 @@ def test_an_adapter_with_no_env_is_one_line():
     assert "give env_id (a gymnasium id) or xml, or override make_env" in _one_line(err.value)
 
 
+def test_actions_that_are_not_a_bounded_box_need_their_own_exploration():
+    adapter = load_adapter(SPEC)
+    env = adapter.make_env(("cam_front",), 16)
+    env.unwrapped.action_space = gym.spaces.Discrete(4)
+    with pytest.raises(SceneAdapterError) as err:
+        adapter.exploration_action(env, np.random.default_rng(0))
+    assert "not a bounded Box: write exploration_action(env, rng)" in _one_line(err.value)
+
+
 def test_unknown_phrases_are_one_line():
     adapter = load_adapter(SPEC)
     assert check_phrases_known(adapter, ("wooden bowl",)) == ("wooden bowl",)

@@ -109,7 +109,7 @@ class SceneAdapter:
             from zsrm.envs.xml_scene import XmlSceneEnv
 
             env = XmlSceneEnv(self.xml, cameras=tuple(cameras), image_size=int(image_size), **self.env_kwargs)
-            return gym.wrappers.TimeLimit(env, max_episode_steps=100)
+            return gym.wrappers.TimeLimit(env, max_episode_steps=100)  # zsrm's episodes (zsrm.envs.EPISODE_STEPS)
         if not self.env_id:
             raise SceneAdapterError(f"{self.name}: give env_id (a gymnasium id) or xml, or override make_env")
         kwargs = dict(self.env_kwargs, cameras=tuple(cameras), image_size=int(image_size))
@@ -127,6 +127,9 @@ class SceneAdapter:
     def exploration_action(self, env: gym.Env, rng: np.random.Generator) -> np.ndarray:
         """An exploration action (paper 2.2: random actions): uniform over a bounded Box."""
         space = env.action_space
+        if not (isinstance(space, gym.spaces.Box) and space.is_bounded()):
+            raise SceneAdapterError(f"{self.name}: the env's actions are {space}, not a bounded Box: "
+                                    "write exploration_action(env, rng)")
         return rng.uniform(space.low, space.high).astype(space.dtype)
 
     def object_positions(self, env: gym.Env) -> dict[str, np.ndarray]:
