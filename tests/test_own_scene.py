@@ -1,6 +1,6 @@
 """A scene zsrm was not built for: the adapter contract (one clear line for each bad adapter), the
 example scene of examples/own_scene (gymnasium's checks, a render per camera role), a tiny
-collect from it that resumes, and zsrm's code that knows nothing of it."""
+collect from it that resumes, goals over its objects, and zsrm's code that knows nothing of it."""
 from __future__ import annotations
 
 import ast
@@ -26,6 +26,10 @@ from zsrm.data.collect import CollectConfig, collect  # noqa: E402
 from zsrm.data.dataset import ExplorationData  # noqa: E402
 from zsrm.envs.adapter import (ROLES, SceneAdapter, SceneAdapterError, check_env, check_phrases_known,  # noqa: E402
                                load_adapter, register_scene)
+from zsrm.rl.goals import scene_goal  # noqa: E402
+from zsrm.tasks.language import GoalError, parse_goal  # noqa: E402
+from zsrm.tasks.negatives import candidate_texts  # noqa: E402
+from zsrm.tasks.scene_goals import parse_scene_goal  # noqa: E402
 
 SPEC = "examples.own_scene.adapter:OwnScene"
 
@@ -159,8 +163,9 @@ def test_the_command_line_prints_a_bad_scene_as_one_line(tmp_path, capsys):
     assert "not both" in capsys.readouterr().err
 
 
-def test_the_adapter_docstring_runs():
-    result = doctest.testmod(importlib.import_module("zsrm.envs.adapter"), optionflags=doctest.ELLIPSIS)
+@pytest.mark.parametrize("module", ["zsrm.envs.adapter", "zsrm.tasks.scene_goals"])
+def test_the_docstrings_run(module):
+    result = doctest.testmod(importlib.import_module(module), optionflags=doctest.ELLIPSIS)
     assert result.attempted > 0 and result.failed == 0
 
 
@@ -367,3 +372,65 @@ def test_pretrain_vlm_on_the_example_scene_names_its_objects(tmp_path, capsys):
 def test_pretrain_vlm_scene_refuses_what_does_not_fit(extra, words, capsys):
     assert main(["pretrain-vlm", "--scene", SPEC, *extra]) == 2
     assert words in capsys.readouterr().err
+
+
+# --- goals over the scene's objects -----------------------------------------------------------
+PHRASES = tuple(BODIES)
+
+
+@pytest.mark.parametrize("text, relation, objects", [
+    ("a red cylinder on the right of a purple cylinder", "right_of", ("red cylinder", "purple cylinder")),
+    ("a red cylinder close to an orange cylinder", "close_to", ("red cylinder", "orange cylinder")),
+    ("Put the red cylinder into the wooden bowl.", "inside_of", ("red cylinder", "wooden bowl")),
+    ("a red cylinder inside of a wooden bowl", "inside_of", ("red cylinder", "wooden bowl")),
+    ("push the purple cylinder to the orange cylinder's left", "left_of", ("purple cylinder", "orange cylinder")),
+    ("the red cylinder and the orange cylinder next to each other", "close_to", ("red cylinder", "orange cylinder")),
+    ("a red cylinder in between a purple cylinder and an orange cylinder", "in_between",
+     ("red cylinder", "purple cylinder", "orange cylinder")),
+])
+def test_goals_name_the_scenes_objects_by_their_phrases(text, relation, objects):
+    goal = scene_goal(text, SPEC)
+    assert (goal.relation, goal.objects) == (relation, objects)
+    assert parse_scene_goal(goal.text, PHRASES) == goal  # the canonical sentence reads back
+
+
+@pytest.mark.parametrize("text, words", [
+    ("a green cube on the right of a red cylinder", "unknown object 'green cube'"),
+    ("a red cylinder on the rihgt of a purple cylinder",
+     "no relation between the red cylinder and the purple cylinder ('on the rihgt of' is not one); known relations: "
+     "on the left of, on the right of, on top of, below, in between, in front of, behind, close to, inside of; "
+     "did you mean 'a red cylinder on the right of a purple cylinder'?"),
+    ("a red cylinder floats over a purple cylinder", "('floats over' is not one); known relations: on the left of"),
+    ("a red cylinder close to a red cylinder", "must name different objects, got the red cylinder twice"),
+    ("a red cylinder", "only one object (red cylinder)"),
+    ("a red cylinder not close to a purple cylinder", "the goal says 'not'"),
+    ("a red cylinder close to a purple cylinder quickly", "words zsrm cannot read: 'quickly'"),
+    ("", "empty goal"),
+])
+def test_a_goal_the_scene_cannot_read_is_one_line_listing_its_objects(text, words):
+    with pytest.raises(ValueError) as err:
+        scene_goal(text, SPEC)
+    line = _one_line(err.value)
+    assert words in line
+    assert line.endswith(f"{SPEC}'s objects: red cylinder, purple cylinder, orange cylinder, wooden bowl")
+
+
+def test_zsrms_goals_and_the_scenes_goals_do_not_mix():
+    with pytest.raises(GoalError, match="unknown colour 'orange'"):
+        parse_goal("a red cylinder close to an orange cylinder")
+    with pytest.raises(GoalError, match="unknown object"):
+        scene_goal("a yellow block on top of a red block", SPEC)
+
+
+def test_a_scene_goals_negatives_are_its_other_relations_and_the_swap_over_its_phrases():
+    goal = scene_goal("a red cylinder on the right of a purple cylinder", SPEC)
+    texts = candidate_texts(goal)
+    assert texts[0] == goal.text and len(set(texts)) == len(texts) == 9  # 7 other two-object relations and the swap
+    assert "a red cylinder on the left of a purple cylinder" in texts
+    assert texts[-1] == "a purple cylinder on the right of a red cylinder"
+    for text in texts:  # every caption names the scene's objects and reads back
+        assert parse_scene_goal(text, PHRASES).text == text
+    close = candidate_texts(scene_goal("the red cylinder next to the orange cylinder", SPEC))
+    assert close[0] == "a red cylinder close to an orange cylinder"
+    assert close[-1] == "a red cylinder far from an orange cylinder"  # symmetric: no swap, the complement instead
+    assert "an orange cylinder close to a red cylinder" not in close

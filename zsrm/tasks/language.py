@@ -83,7 +83,7 @@ class Task:
     @property
     def text(self) -> str:
         """The canonical goal sentence."""
-        names = [f"a {p}" for p in self.phrases]
+        names = [with_article(p) for p in self.phrases]
         rel = RELATIONS[self.relation]
         if rel.arity == 3:
             return f"{names[0]} {rel.phrase} {names[1]} and {names[2]}"
@@ -104,6 +104,11 @@ class Task:
 
     def __str__(self) -> str:
         return self.text
+
+
+def with_article(phrase: str) -> str:
+    """A noun phrase with its indefinite article: "a red block", "an orange plate"."""
+    return f"{'an' if phrase[:1] in 'aeiou' else 'a'} {phrase}"
 
 
 # --- reading a sentence ------------------------------------------------------------------

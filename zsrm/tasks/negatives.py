@@ -21,10 +21,12 @@ relation in the swapped order.
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 
 from zsrm.tasks.catalogue import as_task
-from zsrm.tasks.language import Task, parse_goal
+from zsrm.tasks.language import Task, parse_goal, with_article
 from zsrm.tasks.relations import RELATIONS
+from zsrm.tasks.scene_goals import SceneGoal
 
 # Relations whose predicate does not change when the two objects swap (Table 1: both read a
 # centre distance). Checked against the predicates themselves in the tests.
@@ -56,7 +58,7 @@ def complement_text(task: Task) -> str | None:
     if task.relation not in COMPLEMENTS:
         return None
     a, b = task.phrases
-    return f"a {a} {COMPLEMENTS[task.relation][1]} a {b}"
+    return f"{with_article(a)} {COMPLEMENTS[task.relation][1]} {with_article(b)}"
 
 
 def caption_relation_camera(caption: str) -> tuple[str, str]:
@@ -68,16 +70,22 @@ def caption_relation_camera(caption: str) -> tuple[str, str]:
     return relation, RELATIONS[relation].camera
 
 
+def _goal(task: "str | Task | SceneGoal") -> "Task | SceneGoal":
+    """A Task of zsrm's scenes (from a sentence or a catalogue name), or an own scene's SceneGoal
+    as it is: the negatives of both are built the same way (``replace`` keeps a Task's shape)."""
+    return task if isinstance(task, SceneGoal) else as_task(task)
+
+
 def swapped_tasks(task: Task) -> list[Task]:
     """The goal's relation over the same objects in the orders that mean something else."""
     if task.relation in SYMMETRIC:
         return []
     a, *rest = task.objects
     if len(rest) == 1:
-        return [Task(task.relation, (rest[0], a), task.shape)]
+        return [replace(task, objects=(rest[0], a))]
     # in between: put each other object in the middle; (a, c, b) means the same as (a, b, c).
     b, c = rest
-    return [Task(task.relation, (b, a, c), task.shape), Task(task.relation, (c, a, b), task.shape)]
+    return [replace(task, objects=(b, a, c)), replace(task, objects=(c, a, b))]
 
 
 def negative_tasks(task: str | Task) -> list[Task]:
@@ -86,18 +94,19 @@ def negative_tasks(task: str | Task) -> list[Task]:
     For a two-object task every other two-object relation is used; in between is left out, as
     it needs a third object the task does not name. For the three-object in between, the
     two-object relations relate the first object to each of the other two. Relations the goal
-    implies (:data:`IMPLIED_BY`) are left out.
+    implies (:data:`IMPLIED_BY`) are left out. An own scene's :class:`SceneGoal` gets the same
+    negatives over its phrases.
     """
-    task = as_task(task)
+    task = _goal(task)
     out: list[Task] = []
     first, others = task.objects[0], task.objects[1:]
     for name, rel in RELATIONS.items():
         if name == task.relation or name in IMPLIED_BY.get(task.relation, ()):
             continue
         if rel.arity == len(task.objects):
-            out.append(Task(name, task.objects, task.shape))
+            out.append(replace(task, relation=name))
         elif rel.arity == 2 and len(task.objects) > 2:
-            out += [Task(name, (first, other), task.shape) for other in others]
+            out += [replace(task, relation=name, objects=(first, other)) for other in others]
         # rel.arity > len(task.objects): the task names too few objects to form it.
     out += swapped_tasks(task)
     return out
@@ -106,7 +115,7 @@ def negative_tasks(task: str | Task) -> list[Task]:
 def negative_texts(task: str | Task) -> list[str]:
     """Canonical texts of :func:`negative_tasks`, then the relation's complement if it has one
     ("a blue puck far from a yellow puck" for "a blue puck close to a yellow puck")."""
-    task = as_task(task)
+    task = _goal(task)
     complement = complement_text(task)
     return [t.text for t in negative_tasks(task)] + ([complement] if complement else [])
 
@@ -125,10 +134,11 @@ def candidate_texts(task: str | Task) -> list[str]:
     """The goal's canonical text first, then its negatives: what the binarised reward ranks.
 
     A complement caption (a training caption, not a goal) ranks against the relation it denies.
+    An own scene's :class:`SceneGoal` ranks against its negatives over the scene's phrases.
     """
     if isinstance(task, str):
         denied = complement_of(task.strip())
         if denied is not None:
             return [complement_text(denied), denied.text]
-    task = as_task(task)
+    task = _goal(task)
     return [task.text] + negative_texts(task)
