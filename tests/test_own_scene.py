@@ -1,6 +1,7 @@
 """A scene zsrm was not built for: the adapter contract (one clear line for each bad adapter), the
 example scene of examples/own_scene (gymnasium's checks, a render per camera role), a tiny
-collect from it that resumes, goals over its objects, and zsrm's code that knows nothing of it."""
+collect from it that resumes, goals over its objects, the oracle on it, and zsrm's code that knows
+nothing of it."""
 from __future__ import annotations
 
 import ast
@@ -12,6 +13,7 @@ import sys
 from pathlib import Path
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 import pytest
 
@@ -20,12 +22,13 @@ if str(ROOT) not in sys.path:  # the example lives beside zsrm, as a user's code
     sys.path.insert(0, str(ROOT))
 
 from examples.own_scene.adapter import BODIES, OwnScene, OwnSceneFromXml  # noqa: E402
-from examples.own_scene.env import OwnSceneEnv  # noqa: E402
+from examples.own_scene.env import CYLINDER_REST_Z, REST_Z, OwnSceneEnv  # noqa: E402
 from zsrm.cli import main  # noqa: E402
 from zsrm.data.collect import CollectConfig, collect  # noqa: E402
 from zsrm.data.dataset import ExplorationData  # noqa: E402
 from zsrm.envs.adapter import (ROLES, SceneAdapter, SceneAdapterError, check_env, check_phrases_known,  # noqa: E402
                                load_adapter, register_scene)
+from zsrm.envs.scene_task import SceneTask, role_axes  # noqa: E402
 from zsrm.rl.goals import scene_goal  # noqa: E402
 from zsrm.tasks.language import GoalError, parse_goal  # noqa: E402
 from zsrm.tasks.negatives import candidate_texts  # noqa: E402
@@ -163,7 +166,7 @@ def test_the_command_line_prints_a_bad_scene_as_one_line(tmp_path, capsys):
     assert "not both" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("module", ["zsrm.envs.adapter", "zsrm.tasks.scene_goals"])
+@pytest.mark.parametrize("module", ["zsrm.envs.adapter", "zsrm.tasks.scene_goals", "zsrm.envs.scene_task"])
 def test_the_docstrings_run(module):
     result = doctest.testmod(importlib.import_module(module), optionflags=doctest.ELLIPSIS)
     assert result.attempted > 0 and result.failed == 0
@@ -434,3 +437,82 @@ def test_a_scene_goals_negatives_are_its_other_relations_and_the_swap_over_its_p
     assert close[0] == "a red cylinder close to an orange cylinder"
     assert close[-1] == "a red cylinder far from an orange cylinder"  # symmetric: no swap, the complement instead
     assert "an orange cylinder close to a red cylinder" not in close
+
+
+# --- the oracle on the example scene ----------------------------------------------------------
+def _judge(goal: str, layout: dict, adapter=OwnScene) -> bool:
+    """The oracle's verdict with the objects set by hand at ``layout`` (phrase -> x, y[, z])."""
+    adapter = load_adapter(adapter)
+    task = parse_scene_goal(goal, adapter.objects)
+    role = {"right_of": "front", "on_top_of": "front", "in_front_of": "left"}.get(task.relation, "tilted")
+    env = SceneTask(adapter.make_env((adapter.roles[role],), 16), adapter, task)
+    env.reset(seed=0)
+    base = env.unwrapped
+    parked = [(-0.2, -0.15), (0.2, -0.15), (-0.2, 0.15), (0.2, 0.15)]
+    for phrase, body in BODIES.items():
+        xyz = layout.get(phrase, parked.pop())
+        z = xyz[2] if len(xyz) == 3 else REST_Z.get(body, CYLINDER_REST_Z)
+        base._place(body, (xyz[0], xyz[1], z))
+    mujoco.mj_forward(base.model, base.data)
+    verdict = env.oracle_success()
+    env.close()
+    return verdict
+
+
+@pytest.mark.parametrize("goal, layout, holds", [
+    ("a red cylinder on the right of a purple cylinder", {"red cylinder": (0.10, 0.0), "purple cylinder": (-0.05, 0.0)}, True),
+    ("a red cylinder on the right of a purple cylinder", {"red cylinder": (-0.05, 0.0), "purple cylinder": (0.10, 0.0)}, False),
+    # within the gap (Table 1's margin, 5/6 cm for 5 cm objects): neither side
+    ("a red cylinder on the right of a purple cylinder", {"red cylinder": (0.005, 0.1), "purple cylinder": (0.0, -0.1)}, False),
+    ("a red cylinder close to an orange cylinder", {"red cylinder": (0.0, 0.0), "orange cylinder": (0.06, 0.0)}, True),
+    ("a red cylinder close to an orange cylinder", {"red cylinder": (0.0, 0.0), "orange cylinder": (0.0, 0.12)}, False),
+    # 9 cm apart: close for zsrm's 6 cm blocks (10 cm), not for the example's 5 cm cylinders (8.3 cm)
+    ("a red cylinder close to an orange cylinder", {"red cylinder": (0.0, 0.0), "orange cylinder": (0.09, 0.0)}, False),
+    ("a red cylinder inside of a wooden bowl",
+     {"wooden bowl": (0.05, 0.0), "red cylinder": (0.06, 0.005, REST_Z["bowl"] + 0.038)}, True),
+    ("a red cylinder inside of a wooden bowl", {"wooden bowl": (0.05, 0.0), "red cylinder": (0.12, 0.0)}, False),
+    ("a red cylinder on top of a purple cylinder",
+     {"purple cylinder": (0.0, 0.0), "red cylinder": (0.005, 0.0, CYLINDER_REST_Z + 0.06)}, True),
+    ("a red cylinder on top of a purple cylinder", {"purple cylinder": (0.0, 0.0), "red cylinder": (0.08, 0.0)}, False),
+    ("a red cylinder in front of a purple cylinder", {"red cylinder": (0.0, -0.1), "purple cylinder": (0.0, 0.05)}, True),
+    ("a red cylinder in front of a purple cylinder", {"red cylinder": (0.0, 0.1), "purple cylinder": (0.0, -0.05)}, False),
+])
+def test_the_oracle_on_hand_placed_states(goal, layout, holds):
+    assert _judge(goal, layout) is holds
+
+
+def test_the_oracle_reads_the_object_width_and_the_cameras_own_frame():
+    nine_cm = {"red cylinder": (0.0, 0.0), "orange cylinder": (0.09, 0.0)}
+    assert _judge("a red cylinder close to an orange cylinder", nine_cm, _adapter(object_width=0.06))
+    # red nearer the front camera, in line with purple: not right of it for the front camera; with the
+    # side camera playing the front role, its image x axis points toward the front: right of it.
+    in_line = {"red cylinder": (0.0, -0.1), "purple cylinder": (0.0, 0.1)}
+    assert not _judge("a red cylinder on the right of a purple cylinder", in_line)
+    swapped = _adapter(cameras={"front": "cam_side", "left": "cam_front", "tilted": "cam_high"})
+    assert _judge("a red cylinder on the right of a purple cylinder", in_line, swapped)
+
+
+def test_for_zsrms_own_cameras_the_planes_are_camera_plane():
+    from zsrm.envs.base import load_model
+    from zsrm.tasks.relations import camera_plane
+
+    points = np.random.default_rng(0).uniform(-0.3, 0.6, (5, 3))
+    for asset in ("tabletop.xml", "pushing.xml"):
+        model = load_model(asset)
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
+        for role in ROLES:
+            assert np.allclose(points @ role_axes(model, data, role, role).T, camera_plane(points, role)), (asset, role)
+
+
+def test_the_task_wrapper_observes_by_role_and_writes_the_oracle_into_info():
+    adapter = load_adapter(SPEC)
+    goal = scene_goal("a red cylinder close to an orange cylinder", SPEC)
+    env = SceneTask(adapter.make_env(("cam_high",), 16), adapter, goal, action_repeat=4)
+    obs, info = env.reset(seed=1)
+    assert list(obs) == ["tilted"] and obs["tilted"].shape == (16, 16, 3)
+    assert set(info) == {"oracle_reward", "is_success", "oracle_steps"}  # the user's env's info is empty
+    obs, reward, terminated, truncated, info = env.step(np.zeros(2, np.float32))
+    assert reward == 0.0 and 0 <= info["oracle_steps"] <= 4 and info["oracle_reward"] == float(info["is_success"])
+    assert env.unwrapped.data.time == pytest.approx(4 * 10 * 0.004 + 5 * 10 * 0.004)  # 4 control steps after the reset's 5
+    env.close()
