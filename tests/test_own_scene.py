@@ -1,7 +1,7 @@
 """A scene zsrm was not built for: the adapter contract (one clear line for each bad adapter), the
 example scene of examples/own_scene (gymnasium's checks, a render per camera role), a tiny
-collect from it that resumes, goals over its objects, the oracle on it, and zsrm's code that knows
-nothing of it."""
+collect from it that resumes, goals over its objects, the oracle on it, a tiny zsrm train on it,
+and zsrm's code that knows nothing of it."""
 from __future__ import annotations
 
 import ast
@@ -516,3 +516,105 @@ def test_the_task_wrapper_observes_by_role_and_writes_the_oracle_into_info():
     assert reward == 0.0 and 0 <= info["oracle_steps"] <= 4 and info["oracle_reward"] == float(info["is_success"])
     assert env.unwrapped.data.time == pytest.approx(4 * 10 * 0.004 + 5 * 10 * 0.004)  # 4 control steps after the reset's 5
     env.close()
+
+
+# --- zsrm train on the example scene ----------------------------------------------------------
+class _SideBySide(gym.Wrapper):
+    """The example env with the red and orange cylinders set side by side at the back, out of the
+    pusher's first reach, after each reset: the goal 'close to' holds from the first step."""
+
+    LAYOUT = {"red_cylinder": (-0.03, 0.15), "orange_cylinder": (0.03, 0.15), "purple_cylinder": (-0.15, -0.02),
+              "bowl": (0.15, -0.02)}
+
+    def reset(self, **kwargs):
+        _, info = self.env.reset(**kwargs)
+        base = self.env.unwrapped
+        for body, xy in self.LAYOUT.items():
+            base._place(body, (*xy, REST_Z.get(body, CYLINDER_REST_Z)))
+        base.data.qvel[:] = 0.0  # nothing keeps the speed it had where the reset put it
+        mujoco.mj_forward(base.model, base.data)
+        return base._observation(), info
+
+
+class _StartsInGoal(OwnScene):
+    def make_env(self, cameras, image_size=64, objects=None):
+        return _SideBySide(super().make_env(cameras, image_size, objects))
+
+
+TINY_RL = ["--n-envs", "4", "--n-steps", "128", "--batch-size", "64", "--n-epochs", "1", "--eval-episodes", "2",
+           "--keypoints", "4", "--image-size", "32"]
+
+
+def test_train_on_the_example_scene_with_the_oracle_and_roll_out_its_policy(tmp_path, capsys):
+    out = tmp_path / "run"
+    goal = "a red cylinder close to an orange cylinder"
+    assert main(["train", "--scene", SPEC, "--goal", goal, "--reward", "oracle", "--steps", "2048",
+                 "--eval-every", "2048", "--checkpoint-every", "2048", *TINY_RL, "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["config"]["scene"] == SPEC and summary["config"]["goal"] == goal
+    assert summary["env_steps"] == 2048 and [row["env_steps"] for row in summary["curve"]] == [2048]
+    rewards = summary["final_episode_rewards"]
+    assert len(rewards) == 30 and all(0 <= r <= 100 and r == int(r) for r in rewards)
+    assert json.loads((out / "config.json").read_text())["scene"] == SPEC
+    assert json.loads((out / "policy" / "config.json").read_text())["config"]["scene"] == SPEC
+    capsys.readouterr()
+    assert main(["rollout", str(out / "policy"), "--episodes", "2", "--out", str(tmp_path / "rollout.json")]) == 0
+    result = json.loads((tmp_path / "rollout.json").read_text())
+    assert len(result["episode_rewards"]) == 2 and all(0 <= r <= 100 for r in result["episode_rewards"])
+
+
+def test_the_evaluation_sums_the_oracles_control_steps_in_the_goal(tmp_path):
+    """A scene that starts in the goal: each episode's oracle reward counts its 100 control steps
+    in the relation (oracle_steps), not its 25 decisions."""
+    from zsrm.rl import TrainConfig, train
+
+    register_scene("test-starts-in-goal", _StartsInGoal)
+    cfg = TrainConfig(goal="a red cylinder close to an orange cylinder", scene="test-starts-in-goal",
+                      reward="random", image_size=16)
+    rewards = train(cfg, tmp_path, progress=False)["final_episode_rewards"]
+    assert len(rewards) == 30 and min(rewards) > 25 and max(rewards) == 100
+
+
+def test_train_on_the_example_scene_with_the_base_reward(tmp_path):
+    from zsrm.rl import TrainConfig, train
+
+    cfg = TrainConfig(goal="a red cylinder on the right of a purple cylinder", scene=SPEC, reward="base", steps=256,
+                      eval_every=256, checkpoint_every=256, n_envs=2, n_steps=32, batch_size=32, n_epochs=1,
+                      eval_episodes=2, keypoints=4, image_size=32)
+    summary = train(cfg, tmp_path, progress=False)
+    assert summary["env_steps"] == 256 and summary["config"]["reward"] == "base" and summary["final_episodes"] == 30
+
+
+@pytest.mark.parametrize("reward, words", [
+    ("zsrm", f"the zsrm reward on your own scene ({SPEC}) needs the labeler and a reward model finetuned"),
+    ("vice", "the vice reward fits its goal classifier on zsrm's scripted episodes"),
+])
+def test_train_refuses_a_reward_not_built_for_an_own_scene_in_one_line(reward, words, tmp_path, capsys):
+    goal = "a red cylinder on the right of a purple cylinder"
+    assert main(["train", "--scene", SPEC, "--goal", goal, "--reward", reward, "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0] and not (tmp_path / "r").exists()
+
+
+def test_train_with_a_goal_the_scene_cannot_read_is_one_line(capsys):
+    assert main(["train", "--scene", SPEC, "--goal", "a red block on top of a wooden bowl"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown object 'red block'" in err[0] and "wooden bowl" in err[0]
+
+
+def test_sweep_passes_the_scene_to_every_trial():
+    from zsrm.pipeline.learn import Sweep
+
+    goal = "a red cylinder close to an orange cylinder"
+    sweep = Sweep(tasks=(goal,), rewards=("oracle", "random"), seeds=(0, 1), scene=SPEC, steps=2048)
+    trials = sweep.trials()
+    assert [t["name"] for t in trials][:2] == [f"{goal.replace(' ', '_')}-oracle-0", f"{goal.replace(' ', '_')}-random-0"]
+    assert all(t["config"]["scene"] == SPEC for t in trials) and "--scene " + SPEC in sweep.meta(0, 4)["command"]
+    with pytest.raises(ValueError, match="the zsrm reward on your own scene"):
+        Sweep(tasks=(goal,), rewards=("zsrm",), seeds=(0,), scene=SPEC).trials()
+
+
+def test_zsrms_own_train_config_is_unchanged():
+    from zsrm.rl import TrainConfig
+
+    assert "scene" not in TrainConfig().to_dict() and TrainConfig().scene is None

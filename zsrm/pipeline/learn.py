@@ -99,6 +99,7 @@ class Sweep:
     vlm: str = "scene"  # the VLM whose image trunk the policies read (a folder pretrained by zsrm pretrain-vlm)
     init_root: str | None = None  # start each trial from the policy of the trial of its name under here
     config: Literal["cpu", "paper", "v1"] = "cpu"  # TrainConfig preset of every trial (v1: before 2026-12-04)
+    scene: str | None = None  # your own scene (module:Class or a registered id) whose objects --tasks name (docs/own-scene.md)
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
     def run(self) -> int:
@@ -136,7 +137,7 @@ class Sweep:
             raise ValueError(f"unknown config {self.config!r}; choose one of {', '.join(PRESETS)}")
         return {**PRESETS[self.config], **self.train, "steps": self.steps,
                 "reward_model": absolute_if_folder(self.reward_model),
-                "vlm": absolute_if_folder(self.vlm)}
+                "vlm": absolute_if_folder(self.vlm), **({"scene": self.scene} if self.scene else {})}
 
     def trials(self) -> list[dict]:
         """The sweep's trials: name and TrainConfig (as a dict) of each."""
@@ -153,6 +154,7 @@ class Sweep:
                 "command": f"zsrm sweep --tasks {' '.join(self.tasks)} --rewards {' '.join(self.rewards)} "
                            f"--seeds {' '.join(map(str, self.seeds))} --steps {self.steps} --out {self.out}"
                            + (f" --config {self.config}" if self.config != "cpu" else "")
+                           + (f" --scene {self.scene}" if self.scene else "")
                            + (f" --vlm {self.vlm}" if self.vlm != "scene" else "")
                            + (f" --reward-model {self.reward_model}" if self.reward_model != "student" else ""),
                 "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU"}

@@ -16,6 +16,10 @@ class TrainConfig:
     goal: str = "stack"
     """goal sentence or catalogue task name (stack, place_right, push_close, ..., pendulum: the double
     inverted pendulum of Figure 4, with the base, oracle, curiosity or random reward)"""
+    scene: str | None = None
+    """your own scene (docs/own-scene.md): a SceneAdapter as module:Class or a registered id; the goal then
+    names its objects by their phrases, and trains with the oracle, base, curiosity or random reward
+    (default: zsrm's own scenes, chosen by the goal)"""
     reward: Literal["oracle", "zsrm", "base", "vice", "curiosity", "random"] = "oracle"
     """reward the policy learns from: oracle (privileged), zsrm (the full reward model), base (the VLM's
     image-goal cosine; for the pendulum 1 when the goal beats the other poses' sentences), vice (privileged
@@ -102,7 +106,7 @@ class TrainConfig:
     # Settings added after runs were committed: written only when changed, so that a finished
     # run made before they existed still matches its configuration.
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0,
-             "target_kl": 0.0, "anneal_lr": False}
+             "target_kl": 0.0, "anneal_lr": False, "scene": None}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False}
@@ -120,18 +124,20 @@ class TrainConfig:
             raise ValueError(f"target_kl must be >= 0 (0: no early stop), got {self.target_kl}")
         if self.start not in ("auto", "above", "around"):
             raise ValueError(f"unknown start {self.start!r}; choose auto, above or around")
-        relation = goal_relation(self.goal)
+        if self.scene is not None:
+            check_scene_run(self)
+        relation = goal_relation(self.goal, self.scene)
         if self.choice and relation not in STACKING:
             raise ValueError(f"--choice is for stacking goals (on top of, below): it puts a second possible "
                              f"base beside the moved block; {self.goal!r} is not one")
         if self.start == "auto":
             self.start = "around" if relation in STACKING else "above"
-        if not takes_reward(self.goal, self.reward):
+        if not self.scene and not takes_reward(self.goal, self.reward):
             raise ValueError(f"the {self.reward} reward reads a spatial relation; the pendulum trains with "
                              "base, oracle, curiosity or random")
         if relation is None and self.vlm == "scene":  # the scene VLM never saw the pole: its pose words are here
             self.vlm = PENDULUM_VLM
-        if self.layout_version == 0:  # a run of an older layout is another run
+        if self.layout_version == 0 and not self.scene:  # a run of an older layout is another run
             from zsrm.envs import layout_version
             from zsrm.tasks.catalogue import resolve
 
@@ -184,10 +190,34 @@ def takes_reward(goal: str, reward: str) -> bool:
 STACKING = ("on_top_of", "below")
 
 
-def goal_relation(goal: str) -> str | None:
-    """The relation of a goal sentence or catalogue task (None for the pendulum)."""
+def check_scene_run(cfg: TrainConfig) -> None:
+    """A run on a user's own scene: a scene named as the config records it, a reward that needs
+    nothing zsrm builds only for its own scenes, none of the tabletop's starts; one line each."""
+    if not isinstance(cfg.scene, str) or not cfg.scene:
+        raise ValueError(f"scene must be module:Class or a registered id, got {cfg.scene!r}")
+    if cfg.reward == "zsrm":
+        raise ValueError(f"the zsrm reward on your own scene ({cfg.scene}) needs the labeler and a reward model "
+                         "finetuned on that scene's data, which zsrm label, reward-data and finetune do not build "
+                         "yet (docs/own-scene.md); train with the oracle, base, curiosity or random reward")
+    if cfg.reward == "vice":
+        raise ValueError(f"the vice reward fits its goal classifier on zsrm's scripted episodes, which your own "
+                         f"scene ({cfg.scene}) has not; train with the oracle, base, curiosity or random reward")
+    if cfg.choice:
+        raise ValueError("--choice adds a block to zsrm's tabletop; your own scene holds the objects its env holds")
+    if cfg.start not in ("auto", "above"):
+        raise ValueError(f"start {cfg.start!r} is for the tabletop's blocks; your own scene starts as its env does")
+    cfg.start = "above"  # the default: nothing to record
+
+
+def goal_relation(goal: str, scene: str | None = None) -> str | None:
+    """The relation of a goal sentence or catalogue task (None for the pendulum); with ``scene``,
+    of a goal over that own scene's objects."""
     from zsrm.tasks.catalogue import resolve
 
+    if scene:
+        from zsrm.rl.goals import scene_goal
+
+        return scene_goal(goal, scene).relation
     task = resolve(goal).task
     return task.relation if task is not None else None
 

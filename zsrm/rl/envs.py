@@ -3,7 +3,11 @@ relation is read on, with the reward (oracle or zsrm) in one batched call per st
 
 The double pendulum (goal ``pendulum``, Figure 4) is one of them: its one camera (front), no
 start spread, episodes capped at 100 control steps like the other scenes (the env ends one
-earlier when the pendulum falls; gymnasium's own cap of 1000 never comes)."""
+earlier when the pendulum falls; gymnasium's own cap of 1000 never comes).
+
+A user's own scene (``cfg.scene``, a :class:`zsrm.envs.SceneAdapter`) is made by its adapter and
+wrapped in :class:`zsrm.envs.scene_task.SceneTask` (the goal's role camera, the action repeat, the
+oracle in ``info``), so that the user's env needs no change."""
 from __future__ import annotations
 
 import gymnasium as gym
@@ -11,7 +15,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 import zsrm.envs  # noqa: F401  (registers the scenes)
 from zsrm.rl.config import TrainConfig
-from zsrm.rl.goals import goal_camera, is_pendulum, task_entry
+from zsrm.rl.goals import goal_camera, is_pendulum, scene_goal, task_entry
 from zsrm.tasks.catalogue import PENDULUM_ID, TABLETOP_ID, choice_colour
 
 EPISODE_STEPS = 100
@@ -22,6 +26,8 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
     """``n_envs`` scenes of the goal in one process, seeded ``seed, seed + 1, ...``; with
     ``distractors``, colours the goal does not name are in the scene too (at the back of the
     table; with ``cfg.choice``, the one distractor in line, :func:`choice_colour`'s by default)."""
+    if cfg.scene:
+        return make_scene_vec(cfg, n_envs, seed, spread, distractors)
     entry = task_entry(cfg.goal)
     kwargs = dict(task=entry.goal, cameras=(goal_camera(cfg.goal),), image_size=cfg.image_size,
                   action_repeat=cfg.action_repeat)
@@ -47,6 +53,31 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
     return venv
 
 
+def make_scene_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
+                   distractors: tuple[str, ...] = ()) -> DummyVecEnv:
+    """:func:`make_vec` on a user's own scene: its adapter's env observing the goal's role camera,
+    all its objects, as its own reset lays them out."""
+    from zsrm.envs.adapter import check_env, load_adapter
+    from zsrm.envs.scene_task import SceneTask
+
+    if spread != "seen":
+        raise ValueError(f"spread {spread!r}: your own scene ({cfg.scene}) starts as its env does, with no spread "
+                         "to widen")
+    if distractors:
+        raise ValueError(f"your own scene ({cfg.scene}) holds the objects its env holds; it takes no distractors")
+    adapter, goal = load_adapter(cfg.scene), scene_goal(cfg.goal, cfg.scene)
+    role = goal_camera(cfg.goal, cfg.scene)
+
+    def make():
+        env = check_env(adapter, adapter.make_env((adapter.roles[role],), cfg.image_size), roles=(role,))
+        return gym.wrappers.TimeLimit(SceneTask(env, adapter, goal, cfg.action_repeat),
+                                      max_episode_steps=EPISODE_STEPS // cfg.action_repeat)
+
+    venv = DummyVecEnv([make for _ in range(n_envs)])
+    venv.seed(seed)
+    return venv
+
+
 def make_reward(cfg: TrainConfig, folder=None):
     """The RewardModel that ``cfg.reward`` names: oracle, zsrm, base (the VLM ``cfg.vlm``'s cosine
     of the frame and the goal, paper 2.1; for the pendulum binarised: 1 when the goal beats the
@@ -64,11 +95,11 @@ def make_reward(cfg: TrainConfig, folder=None):
     if cfg.reward == "base":
         from zsrm.vlm import load_vlm
 
-        if is_pendulum(cfg.goal):
+        if is_pendulum(cfg.goal, cfg.scene):
             from zsrm.tasks.pendulum import NEGATIVES
 
             return BaseReward(load_vlm(cfg.vlm), camera="front", mode="binary", negatives=NEGATIVES)
-        return BaseReward(load_vlm(cfg.vlm), camera=goal_camera(cfg.goal), mode="cosine")
+        return BaseReward(load_vlm(cfg.vlm), camera=goal_camera(cfg.goal, cfg.scene), mode="cosine")
     if cfg.reward == "vice":
         from zsrm.rl.vice import vice_reward
 

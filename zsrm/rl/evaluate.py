@@ -83,7 +83,8 @@ class Evaluator:
     def __call__(self, act, episodes: int | None = None) -> dict:
         venv = self.venv(episodes or self.episodes)
         venv.seed(self.seed)  # the next reset seeds every env as make_vec did
-        out = run_vec_episodes(venv, act, key="oracle_reward" if is_pendulum(self.cfg.goal) else "oracle_steps")
+        key = "oracle_reward" if is_pendulum(self.cfg.goal, self.cfg.scene) else "oracle_steps"
+        out = run_vec_episodes(venv, act, key=key)
         mean, se = mean_se(out["episode_rewards"])
         return {"mean": mean, "se": se, "success_rate": float(np.mean(out["successes"])), **out}
 
@@ -132,7 +133,7 @@ def rollout(policy: str | Path, episodes: int = 10, seed: int = 0, spread: str =
     torch.manual_seed(eval_seed(seed))  # a policy that samples its actions: same seed, same episodes
     frames = []
     if gif:
-        record = FirstEpisodeFrames(goal_camera(cfg.goal), frames)
+        record = FirstEpisodeFrames(goal_camera(cfg.goal, cfg.scene), frames)
         wrap = (lambda v: features(record.wrap(v))) if features else record.wrap
     else:
         wrap = features

@@ -103,7 +103,7 @@ def policy_view(venv: VecEnv, vlm, cfg) -> VecImageFeatures:
     the frozen VLM trunk and the pixel CNN, at the sizes ``cfg`` names."""
     from zsrm.rl.goals import goal_camera
 
-    return VecImageFeatures(venv, vlm, goal_camera(cfg.goal), cfg.trunk_size, cfg.pixel_size)
+    return VecImageFeatures(venv, vlm, goal_camera(cfg.goal, cfg.scene), cfg.trunk_size, cfg.pixel_size)
 
 
 class SpatialSoftmax(nn.Module):

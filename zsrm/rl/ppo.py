@@ -32,7 +32,7 @@ from zsrm.rl.curiosity import ICMUpdate, VecCuriosity
 from zsrm.rl.envs import make_reward, make_vec
 from zsrm.rl.evaluate import Evaluator, evaluate, random_actions
 from zsrm.rl.features import policy_view
-from zsrm.rl.goals import goal_camera, task_entry
+from zsrm.rl.goals import goal_camera, goal_text
 from zsrm.rl.policy import PolicyBundle, load_checkpoint, policy_kwargs, save_checkpoint
 from zsrm.rl.resume import RunState
 from zsrm.vlm import load_vlm
@@ -235,10 +235,10 @@ def rewarded_env(cfg: TrainConfig, out: Path, done_steps: int):
     trains and the modules a checkpoint must keep for it (curiosity's ICM)."""
     venv = make_vec(cfg, cfg.n_envs, cfg.seed * 10_000 + done_steps)
     if cfg.reward == "curiosity":
-        curiosity = VecCuriosity(venv, goal_camera(cfg.goal), seed=cfg.seed)
+        curiosity = VecCuriosity(venv, goal_camera(cfg.goal, cfg.scene), seed=cfg.seed)
         return curiosity, [ICMUpdate(curiosity)], {"icm.safetensors": curiosity.icm}
     reward = make_reward(cfg, out / "vice")
-    return VecZeroShotReward(venv, reward, task_entry(cfg.goal).goal), [], {}
+    return VecZeroShotReward(venv, reward, goal_text(cfg.goal, cfg.scene)), [], {}
 
 
 def finish_random(cfg: TrainConfig, out: Path) -> dict:

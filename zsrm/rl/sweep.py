@@ -55,10 +55,11 @@ def trial_grid(tasks, rewards, seeds, overrides: dict | None = None, init_root: 
     task and reward on its first seeds. ``init_root``: each trial starts from the policy of the
     trial of its name there (``<init_root>/<name>/policy``, TrainConfig's ``init``)."""
     trials = []
+    scene = (overrides or {}).get("scene")  # an own scene's goals: TrainConfig refuses a reward it cannot take
     for seed in seeds:
         for task in tasks:
             for reward in rewards:
-                if not takes_reward(task, reward):
+                if not scene and not takes_reward(task, reward):
                     continue
                 name = trial_name(task, reward, seed)
                 init = {"init": str(Path(init_root) / name / "policy")} if init_root else {}
