@@ -469,7 +469,8 @@ def test_eval_multitask_reuses_finished_cells_and_rescores_changed_ones(pipeline
 
     first = json.loads((pipeline / "table2.json").read_text())
     csv_rows = (pipeline / "table2.csv").read_text().splitlines()
-    assert csv_rows[0] == "policy,spread,split,mean,se,episodes" and len(csv_rows) == 1 + 4 * 2 * 2
+    # One row per cell of all the split's tasks and one per relation (the fixture's two tasks per split stack).
+    assert csv_rows[0] == "policy,spread,split,relation,mean,se,episodes" and len(csv_rows) == 1 + 4 * 2 * 2 * 2
     assert len(list((pipeline / "distill" / "eval").glob("*.json"))) == 4 * 2 * 2
 
     def scored(policy, goal, embedding, seeds, spread, task_seed, choice=False):
@@ -496,6 +497,56 @@ def test_eval_multitask_reuses_finished_cells_and_rescores_changed_ones(pipeline
     M.evaluate_policies({"language": policies["language"]}, load_vlm("scene"), M.split_goals(2), 3,
                         progress=False, cache=cache)
     assert len(calls) == 2 * 2 * 2
+
+
+def test_table2_has_a_cell_per_relation_and_each_relations_ceiling(pipeline, tmp_path, monkeypatch):
+    import zsrm.evaluation.multitask as M
+    from zsrm.rl.evaluate import mean_se_cell
+
+    # The ceiling: the task policies' own rollouts, split by each task's relation (the fixture's two
+    # tasks stack and place right).
+    table = json.loads((pipeline / "table2.json").read_text())
+    ceiling = table["oracle_task_policies"]["relations"]
+    assert list(ceiling) == ["on_top_of", "right_of"]
+    for info in RolloutData(pipeline / "rollouts").infos:
+        assert ceiling[parse_goal(info["goal"]).relation] == mean_se_cell(info["episode_rewards"])
+    # The fixture's splits hold two stacking tasks each: their one relation's cell is the split's.
+    cell = table["language"]["seen"]["test"]
+    assert cell["relations"] == {"on_top_of": {k: cell[k] for k in ("mean", "se", "episodes")}}
+
+    # Every relation: each task's episodes count in its own relation's cell and nowhere else.
+    rewards = {TRAIN_TASKS[0].text: [10.0, 30.0], TRAIN_TASKS[6].text: [1.0, 3.0], TRAIN_TASKS[7].text: [5.0, 7.0],
+               TRAIN_TASKS[12].text: [0.0, 2.0], TEST_TASKS[0].text: [50.0, 70.0], TEST_TASKS[6].text: [4.0, 4.0],
+               TEST_TASKS[12].text: [9.0, 11.0]}
+    monkeypatch.setattr(M, "task_rewards", lambda policy, goal, *args, **kw: rewards[goal])
+    splits = {"train": [TRAIN_TASKS[i].text for i in (0, 6, 7, 12)], "test": [TEST_TASKS[i].text for i in (0, 6, 12)]}
+    _, policies = load_distilled(pipeline / "distill")
+    cells = M.evaluate_policies({"language": policies["language"]}, load_vlm("scene"), splits, 2, progress=False)
+    train = cells["language"]["seen"]["train"]
+    assert list(train["relations"]) == ["on_top_of", "left_of", "right_of"]
+    assert train["relations"]["left_of"] == mean_se_cell([1.0, 3.0, 5.0, 7.0])
+    assert train["relations"]["on_top_of"] == mean_se_cell([10.0, 30.0])
+    assert cells["language"]["unseen"]["test"]["relations"]["right_of"] == mean_se_cell([9.0, 11.0])
+    assert train["mean"] == pytest.approx(np.mean([r for g in splits["train"] for r in rewards[g]]))
+    # The markdown, CSV and plot show them, with each relation's ceiling.
+    out = tmp_path / "table2.json"
+    M.write_table({**{k: v for k, v in table.items() if k not in M.POLICY_NAMES}, **cells}, out)
+    md = out.with_suffix(".md").read_text()
+    assert "| on the left of | Language Cond. | 4.0 +- 1.3 | 4.0 +- 0.0 | 4.0 +- 1.3 | 4.0 +- 0.0 |" in md
+    top = ceiling["on_top_of"]
+    assert f"| on top of | the task policies (ceiling) | {top['mean']:.1f} +- {top['se']:.1f} |" in md
+    rows = out.with_suffix(".csv").read_text().splitlines()
+    assert "language,seen,train,left_of,4,1.29099,4" in rows and len(rows) == 1 + 2 * 2 * (1 + 3)
+    assert out.with_suffix(".png").read_bytes()[:4] == b"\x89PNG"
+    # A cell cached before relations were kept is scored again.
+    cache = tmp_path / "cells"
+    M.evaluate_policies({"language": policies["language"]}, load_vlm("scene"), splits, 2, progress=False, cache=cache)
+    saved = json.loads((cache / "language-seen-train.json").read_text())
+    del saved["result"]["relations"]
+    (cache / "language-seen-train.json").write_text(json.dumps(saved))
+    again = M.evaluate_policies({"language": policies["language"]}, load_vlm("scene"), splits, 2, progress=False,
+                                cache=cache)
+    assert again["language"]["seen"]["train"]["relations"] == train["relations"]
 
 
 def test_docstring_examples():

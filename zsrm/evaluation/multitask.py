@@ -6,8 +6,9 @@ one (two), and is scored with the oracle episode reward (control steps of 100 in
 relation). Where the stacking task policies were trained and rolled out in choice scenes (a
 third block beside the moved one: the base must be found by colour), the stacking goals, the
 test ones too, are scored in choice scenes. Per policy, spread and split: the mean and
-standard error over all the split's episodes. The ceiling, ``oracle_task_policies``, is the task policies' own oracle episode
-reward over the rollouts the policies were distilled from.
+standard error over all the split's episodes, and the same per relation (on top of, left of,
+right of: ``relations``). The ceiling, ``oracle_task_policies``, is the task policies' own oracle
+episode reward over the rollouts the policies were distilled from, also per relation.
 """
 from __future__ import annotations
 
@@ -26,15 +27,32 @@ from zsrm.rl.config import STACKING, TrainConfig, goal_relation
 from zsrm.rl.envs import make_vec
 from zsrm.rl.evaluate import mean_se_cell
 from zsrm.rl.goals import goal_camera
-from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS, choice_colours
+from zsrm.tasks.catalogue import MULTITASK_RELATIONS, TEST_TASKS, TRAIN_TASKS, choice_colours
 from zsrm.tasks.language import parse_goal
-from zsrm.tasks.relations import holds_in_world
+from zsrm.tasks.relations import RELATIONS, holds_in_world
 
 EVAL_SEED = 3_000_000  # evaluation scenes: seeds apart from the training and collection envs'
 POLICY_NAMES = {"none": "No Conditioning", "primitive": "Primitive Code Cond.", "language": "Language Cond.",
                 "grounded": "Grounded Language Cond. (zsrm)"}  # table order
 SPREADS = ("seen", "unseen")
 SPLITS = ("train", "test")
+
+
+def relation_cells(goals: list[str], rewards: list[list[float]]) -> dict:
+    """``{relation: {mean, se, episodes}}`` over the episodes of the goals of each relation (read
+    from the parsed goal), in MULTITASK_RELATIONS order; ``rewards[i]`` are ``goals[i]``'s episodes."""
+    by_relation: dict[str, list[float]] = {}
+    for goal, episodes in zip(goals, rewards):
+        by_relation.setdefault(parse_goal(goal).relation, []).extend(episodes)
+    order = [r for r in MULTITASK_RELATIONS if r in by_relation] + sorted(set(by_relation) - set(MULTITASK_RELATIONS))
+    return {r: mean_se_cell(by_relation[r]) for r in order}
+
+
+def ceiling(data) -> dict:
+    """``oracle_task_policies``: the task policies' oracle episode rewards over the rollouts in
+    ``data`` (a :class:`~zsrm.policy.rollouts.RolloutData`), all tasks and per relation."""
+    return {**mean_se_cell(data.episode_rewards), "tasks": len(data.goals),
+            "relations": relation_cells(data.goals, [info["episode_rewards"] for info in data.infos])}
 
 
 def task_seed(index: int) -> int:
@@ -115,7 +133,8 @@ def weights_key(policy: DistilledPolicy) -> str:
 def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[str, list[str]], seeds: int,
                       spreads=SPREADS, progress: bool = True, cache: str | Path | None = None,
                       choice: bool = False) -> dict:
-    """``<policy>.<spread>.<split>.{mean, se, episodes}`` and the per-task means; ``choice``: the
+    """``<policy>.<spread>.<split>.{mean, se, episodes}``, the per-task means and the cells per relation
+    (``relations``, :func:`relation_cells`); ``choice``: the
     stacking goals (training and test) in choice scenes, as their task policies were. With ``cache``,
     each (policy, spread, split) cell is saved there as it finishes and reused while the policy's
     weights, the goals and the seeds are the same: a killed evaluation resumes at the first
@@ -136,13 +155,14 @@ def evaluate_policies(policies: dict[str, DistilledPolicy], vlm, splits: dict[st
             cell = read_json(path) if path else {}
         except (FileNotFoundError, ZsrmFileError):
             cell = {}
-        if cell.get("key") != key:
+        if cell.get("key") != key or "relations" not in cell.get("result", {}):  # cells cached before relations
             embeddings = embed_goals(vlm, goals, policy.cfg.text_embedding)
             per_task = [task_rewards(policy, goal, embeddings[i:i + 1], seeds, spread, task_seed(i), choice)
                         for i, goal in enumerate(goals)]
             cell = {"key": key, "result": {
                 **mean_se_cell([r for rewards in per_task for r in rewards]),
-                "per_task": {goal: float(np.mean(r)) for goal, r in zip(goals, per_task)}}}
+                "per_task": {goal: float(np.mean(r)) for goal, r in zip(goals, per_task)},
+                "relations": relation_cells(goals, per_task)}}
             if path:
                 write_json(path, cell)
         out.setdefault(name, {}).setdefault(spread, {})[split] = cell["result"]
@@ -185,40 +205,100 @@ def table_markdown(table: dict) -> str:
                  "(`--text-span`)." if "span" in table.get("language_text", "") else "")
               + (" Stacking goals in choice scenes (a third block beside the moved one)."
                  if table.get("scenes") == "choice" else "")]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + relations_markdown(table)) + "\n"
 
 
-def plot_table(table: dict, path: str | Path) -> Path:
-    """Bars of the mean (s.e. whiskers) per spread and split, one colour per policy; the task
-    policies' own mean as a dashed line."""
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+def table_relations(table: dict) -> list[str]:
+    """The relations a table has cells for (none in tables written before they were kept)."""
+    cells = [table[n][s][p].get("relations", {}) for n in POLICY_NAMES if n in table for s in SPREADS for p in SPLITS]
+    return [r for r in MULTITASK_RELATIONS if cells and all(r in c for c in cells)]
+
+
+def relations_markdown(table: dict) -> list[str]:
+    """Per relation: each policy's mean +- s.e. per spread and split, and the relation's ceiling."""
+    relations = table_relations(table)
+    if not relations:
+        return []
+    lines = ["", "Per relation (mean +- s.e.; the ceiling: the task policies over their own rollouts, seen spread, "
+             "training tasks):", "", "| relation | policy | " + " | ".join(f"{s} {p}" for s in SPREADS for p in SPLITS)
+             + " |", "|---" * (2 + len(SPREADS) * len(SPLITS)) + "|"]
+    ceilings = table["oracle_task_policies"].get("relations", {})
+    for relation in relations:
+        for name in POLICY_NAMES:
+            if name in table:
+                cells = [table[name][s][p]["relations"][relation] for s in SPREADS for p in SPLITS]
+                lines.append(f"| {RELATIONS[relation].phrase} | {POLICY_NAMES[name]} | "
+                             + " | ".join(f"{c['mean']:.1f} +- {c['se']:.1f}" for c in cells) + " |")
+        if relation in ceilings:
+            top = ceilings[relation]
+            lines.append(f"| {RELATIONS[relation].phrase} | the task policies (ceiling) | {top['mean']:.1f} +- "
+                         f"{top['se']:.1f} |" + " |" * (len(SPREADS) * len(SPLITS) - 1))
+    return lines
+
+
+def plot_bars(ax, table: dict, relation: str | None = None) -> None:
+    """Bars of the mean (s.e. whiskers) per spread and split, one colour per policy, of all tasks or of
+    one ``relation``'s; the task policies' own mean (the ceiling) as a dashed line."""
     groups = [(s, p) for s in SPREADS for p in SPLITS]
     names = [n for n in POLICY_NAMES if n in table]
     width = 0.8 / max(1, len(names))
     for k, name in enumerate(names):
+        cells = [table[name][s][p] if relation is None else table[name][s][p]["relations"][relation]
+                 for s, p in groups]
         x = np.arange(len(groups)) + (k - (len(names) - 1) / 2) * width
-        ax.bar(x, [table[name][s][p]["mean"] for s, p in groups], width,
-               yerr=[table[name][s][p]["se"] for s, p in groups], capsize=3, label=POLICY_NAMES[name])
-    ax.axhline(table["oracle_task_policies"]["mean"], color="k", linestyle="--", linewidth=1,
-               label="task policies (seen)")
+        ax.bar(x, [c["mean"] for c in cells], width, yerr=[c["se"] for c in cells], capsize=2,
+               color=f"C{k}", label=POLICY_NAMES[name])
+    top = table["oracle_task_policies"]
+    top = top if relation is None else top.get("relations", {}).get(relation)
+    if top:
+        ax.axhline(top["mean"], color="k", linestyle="--", linewidth=1, label="task policies (seen train): ceiling")
+    ax.set_xticks(np.arange(len(groups)), [f"{s}\n{p}" for s, p in groups])
+    ax.grid(axis="y", alpha=0.3)
+
+
+def plot_table(table: dict, path: str | Path) -> Path:
+    """All tasks on top; below, where the table has them, one panel per relation on a shared scale."""
+    plt = pyplot()
+    relations = table_relations(table)
+    if relations:
+        fig, axes = plt.subplot_mosaic([["all"] * len(relations), relations], figsize=(9, 8),
+                                       height_ratios=(1.2, 1))
+        ax, panels = axes["all"], [axes[r] for r in relations]
+    else:
+        fig, ax = plt.subplots(figsize=(7.5, 4.2))
+        panels = []
+    plot_bars(ax, table)
     ax.set_ylim(0, max(1.0, ax.get_ylim()[1]))
-    ax.set_xticks(np.arange(len(groups)), [f"{s}\n{p} tasks" for s, p in groups])
     ax.set_ylabel("oracle episode reward (of 100)")
     view = (f", {table['image_view']} frames" if "image_view" in table else "") + (
         ", choice scenes" if table.get("scenes") == "choice" else "")
     ax.set_title(f"Table 2: multi-task policies ({table['schedule']} schedule, {table['tower']} tower{view})")
-    # Below the axes: inside, it would hide the bars.
+    for k, (panel, relation) in enumerate(zip(panels, relations)):
+        plot_bars(panel, table, relation)
+        panel.set_ylim(0, 100)
+        panel.set_title(RELATIONS[relation].phrase, fontsize=10)
+        if k == 0:
+            panel.set_ylabel("per relation (S: seen, U: unseen)")
+        else:
+            panel.tick_params(labelleft=False)
+    # Below the axes: inside, it would hide the bars; tick labels of a panel of its own, shorter.
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3, frameon=False)
-    ax.grid(axis="y", alpha=0.3)
+    for panel in panels:
+        panel.set_xticks(panel.get_xticks(), [f"{s[0].upper()}\n{p}" for s in SPREADS for p in SPLITS], fontsize=8)
     return save_figure(fig, path)
 
 
 def table_rows(table: dict) -> list[dict]:
-    """Table 2 as rows (one per policy, spread and split) for the CSV."""
-    return [{"policy": name, "spread": spread, "split": split, "mean": table[name][spread][split]["mean"],
-             "se": table[name][spread][split]["se"], "episodes": table[name][spread][split]["episodes"]}
-            for name in POLICY_NAMES if name in table for spread in SPREADS for split in SPLITS]
+    """Table 2 as rows (one per policy, spread, split and relation, ``all`` first) for the CSV."""
+    rows = []
+    for name in (n for n in POLICY_NAMES if n in table):
+        for spread in SPREADS:
+            for split in SPLITS:
+                cell = table[name][spread][split]
+                for relation, c in [("all", cell), *cell.get("relations", {}).items()]:
+                    rows.append({"policy": name, "spread": spread, "split": split, "relation": relation,
+                                 "mean": c["mean"], "se": c["se"], "episodes": c["episodes"]})
+    return rows
 
 
 def write_table(table: dict, path: str | Path) -> list[Path]:

@@ -164,10 +164,9 @@ class EvalMultitask:
 
         import torch
 
-        from zsrm.evaluation.multitask import evaluate_policies, primitive_mapping, split_goals, write_table
+        from zsrm.evaluation.multitask import ceiling, evaluate_policies, primitive_mapping, split_goals, write_table
         from zsrm.policy.rollouts import RolloutData
         from zsrm.policy.training import load_distilled
-        from zsrm.rl.evaluate import mean_se_cell
         from zsrm.vlm import load_vlm
 
         check_writable(self.out)
@@ -189,7 +188,7 @@ class EvalMultitask:
         table.update(schedule=summary["schedule"], tower=summary["tower"], **({"scenes": "choice"} if choice else {}),
                      **({"image_view": ", ".join(sorted(views))} if views else {}),
                      **language_text(policies),
-                     oracle_task_policies={**mean_se_cell(data.episode_rewards), "tasks": len(data.goals)},
+                     oracle_task_policies=ceiling(data),
                      meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
                                     if "primitive" in policies else None))
         for path in write_table(table, self.out):
@@ -204,7 +203,7 @@ class EvalMultitask:
                 **({"keypoint_view": summary["keypoint_view"]} if "keypoint_view" in summary else {}),
                 "primitive_mapping_test": mapping,
                 "metric": "oracle episode reward: control steps of 100 in the goal relation; mean and s.e. over "
-                          "all episodes of the split (seeds x tasks)",
+                          "all episodes of the split (seeds x tasks), and over its tasks of each relation (relations)",
                 "command": f"zsrm eval-multitask --policies {self.policies} --data {self.data} --seeds {self.seeds}"
                            + (f" --tasks {self.tasks}" if self.tasks else "")
                            + (" --text-span" if self.text_span else "") + f" --out {self.out}",
