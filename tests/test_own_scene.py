@@ -518,25 +518,45 @@ def test_the_task_wrapper_observes_by_role_and_writes_the_oracle_into_info():
     env.close()
 
 
+def test_an_episode_never_starts_in_the_goal_and_a_seed_gives_its_start():
+    adapter = load_adapter(SPEC)
+    goal = scene_goal("a red cylinder on the right of a purple cylinder", SPEC)  # about half the env's resets hold it
+    env = SceneTask(adapter.make_env(("cam_front",), 16), adapter, goal)
+    starts = []
+    for seed in range(20):
+        _, info = env.reset(seed=seed)
+        assert not info["is_success"] and info["oracle_steps"] == 0
+        starts.append(adapter.object_positions(env)["red cylinder"])
+    env.reset(seed=7)
+    assert np.array_equal(adapter.object_positions(env)["red cylinder"], starts[7])
+    env.close()
+
+
 # --- zsrm train on the example scene ----------------------------------------------------------
 class _SideBySide(gym.Wrapper):
     """The example env with the red and orange cylinders set side by side at the back, out of the
-    pusher's first reach, after each reset: the goal 'close to' holds from the first step."""
+    pusher's first reach, at the first step of each episode: the goal 'close to' holds from the
+    first control step on (SceneTask makes the reset's own scene one that does not hold it)."""
 
     LAYOUT = {"red_cylinder": (-0.03, 0.15), "orange_cylinder": (0.03, 0.15), "purple_cylinder": (-0.15, -0.02),
               "bowl": (0.15, -0.02)}
 
     def reset(self, **kwargs):
-        _, info = self.env.reset(**kwargs)
-        base = self.env.unwrapped
-        for body, xy in self.LAYOUT.items():
-            base._place(body, (*xy, REST_Z.get(body, CYLINDER_REST_Z)))
-        base.data.qvel[:] = 0.0  # nothing keeps the speed it had where the reset put it
-        mujoco.mj_forward(base.model, base.data)
-        return base._observation(), info
+        self.first = True
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        if self.first:
+            base = self.env.unwrapped
+            for body, xy in self.LAYOUT.items():
+                base._place(body, (*xy, REST_Z.get(body, CYLINDER_REST_Z)))
+            base.data.qvel[:] = 0.0  # nothing keeps the speed it had where the reset put it
+            mujoco.mj_forward(base.model, base.data)
+            self.first = False
+        return self.env.step(action)
 
 
-class _StartsInGoal(OwnScene):
+class _InGoalFromTheFirstStep(OwnScene):
     def make_env(self, cameras, image_size=64, objects=None):
         return _SideBySide(super().make_env(cameras, image_size, objects))
 
@@ -564,12 +584,12 @@ def test_train_on_the_example_scene_with_the_oracle_and_roll_out_its_policy(tmp_
 
 
 def test_the_evaluation_sums_the_oracles_control_steps_in_the_goal(tmp_path):
-    """A scene that starts in the goal: each episode's oracle reward counts its 100 control steps
-    in the relation (oracle_steps), not its 25 decisions."""
+    """A scene in the goal from its first step: each episode's oracle reward counts its 100 control
+    steps in the relation (oracle_steps), not its 25 decisions."""
     from zsrm.rl import TrainConfig, train
 
-    register_scene("test-starts-in-goal", _StartsInGoal)
-    cfg = TrainConfig(goal="a red cylinder close to an orange cylinder", scene="test-starts-in-goal",
+    register_scene("test-in-goal-from-the-first-step", _InGoalFromTheFirstStep)
+    cfg = TrainConfig(goal="a red cylinder close to an orange cylinder", scene="test-in-goal-from-the-first-step",
                       reward="random", image_size=16)
     rewards = train(cfg, tmp_path, progress=False)["final_episode_rewards"]
     assert len(rewards) == 30 and min(rewards) > 25 and max(rewards) == 100

@@ -6,7 +6,8 @@ adapter's cameras by their Table 1 roles (``{"front": image}``, as zsrm's own sc
 each action ``action_repeat`` control steps, and writes the oracle into ``info`` as zsrm's scenes
 do (:mod:`zsrm.envs.base`): ``oracle_reward`` and ``is_success``, the goal's verdict after the
 last control step, and ``oracle_steps``, the control steps in the goal relation (the oracle
-episode reward sums it).
+episode reward sums it). As zsrm's scenes never start in the goal relation, a reset whose scene
+already holds it is drawn again by the env's own reset (up to :data:`MAX_REDRAWS` times).
 
 The oracle reads the adapter's privileged accessor (:meth:`~zsrm.envs.SceneAdapter.object_positions`)
 and judges Table 1's relation in the plane of the role's camera, taken from the MuJoCo camera
@@ -26,6 +27,8 @@ from zsrm.tasks.relations import RELATIONS, WORLD_THRESHOLDS, Thresholds
 
 # WORLD_THRESHOLDS are set for zsrm's 6 cm blocks.
 REFERENCE_WIDTH = 0.06
+# Resets drawn again at most this many times while the goal already holds (then the start is kept).
+MAX_REDRAWS = 20
 
 
 def scene_thresholds(object_width: float) -> Thresholds:
@@ -103,8 +106,12 @@ class SceneTask(gym.Wrapper):
     def _verdict(self, info: dict, steps_in_goal: int, success: bool) -> dict:
         return {**info, "oracle_reward": float(success), "is_success": success, "oracle_steps": steps_in_goal}
 
-    def reset(self, **kwargs):
-        obs, info = self.env.reset(**kwargs)
+    def reset(self, *, seed=None, options=None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        for _ in range(MAX_REDRAWS):  # the env's generator goes on from the seed: the same seed, the same start
+            if not self.oracle_success():
+                break
+            obs, info = self.env.reset(options=options)
         success = self.oracle_success()
         return self.adapter.observe(obs), self._verdict(info, int(success), success)
 
@@ -120,4 +127,4 @@ class SceneTask(gym.Wrapper):
         return self.adapter.observe(obs), total, terminated, truncated, self._verdict(info, in_goal, success)
 
 
-__all__ = ["REFERENCE_WIDTH", "SceneTask", "holds_in_scene", "role_axes", "scene_thresholds"]
+__all__ = ["MAX_REDRAWS", "REFERENCE_WIDTH", "SceneTask", "holds_in_scene", "role_axes", "scene_thresholds"]
