@@ -88,6 +88,36 @@ def test_blue_never_appears_in_the_distillation_data(pipeline):
     venv.close()
 
 
+def test_no_blue_task_word_or_block_reaches_what_distill_trains_on(pipeline, tmp_path):
+    """Through the functions zsrm multitask-rollouts and zsrm distill call: the objects each task's
+    scenes held, the goals, their words and embeddings, and the frames the policies are fitted to."""
+    from zsrm.data.shards import MANIFEST
+    from zsrm.policy.training import cloning_data
+    from zsrm.tasks.catalogue import TEST_COLOUR, TRAIN_COLOURS
+
+    data = RolloutData(pipeline / "rollouts")
+    assert [info["objects"] for info in data.infos] == [sorted(parse_goal(g).objects) for g in GOALS]
+    assert all(set(info["objects"]) <= set(TRAIN_COLOURS) for info in data.infos)
+    vlm = load_vlm("scene")
+    cloning = cloning_data(data, vlm, ["language", "grounded"])
+    assert cloning.goals == GOALS and all(parse_goal(g) in TRAIN_TASKS for g in cloning.goals)
+    assert TEST_COLOUR not in {word for goal in cloning.goals for word in goal.split()}
+    assert torch.equal(cloning.embeddings["language"], embed_goals(vlm, GOALS))  # these goals' and no other's
+    assert sorted(set(cloning.codes.tolist())) == [0, 1] and len(cloning.images) == len(cloning.actions) > 0
+    assert not blue_pixels(cloning.images.permute(0, 2, 3, 1).numpy()).any()
+    # Each distilled policy keeps the goals it was fitted to: the training goals, no blue one.
+    _, policies = load_distilled(pipeline / "distill")
+    assert all(list(policy.cfg.goals) == GOALS for policy in policies.values())
+    # Rollouts whose manifest names a test task are refused before a frame is read.
+    shutil.copytree(pipeline / "rollouts", tmp_path / "rollouts")
+    manifest = json.loads((tmp_path / "rollouts" / MANIFEST).read_text())
+    manifest["shards"]["shard_00000"]["goal"] = TEST_TASKS[0].text
+    (tmp_path / "rollouts" / MANIFEST).write_text(json.dumps(manifest))
+    with pytest.raises(ValueError, match="not one of the 18 training tasks"):
+        Distill(epochs=1, threads=1, policies=("none",), data=str(tmp_path / "rollouts"),
+                out=str(tmp_path / "distill")).run()
+
+
 def test_the_collection_scenes_show_the_tasks_two_blocks_only():
     for goal in GOALS:
         venv = make_vec(TrainConfig(goal=goal), 1, 0)

@@ -11,8 +11,9 @@ shard says so (``choice``). One shard per task in a :class:`~zsrm.data.shards.Sh
 so a killed collection resumes at the first unfinished task. With action repeat 2 an episode
 is 50 decisions covering 100 control steps (the paper's 5,000 steps per task = 2,500 frames).
 
-The manifest also keeps each task policy's oracle episode rewards over these episodes: their
-mean is the ceiling of Table 2 (``oracle_task_policies``).
+The manifest also keeps each task policy's oracle episode rewards over these episodes (their
+mean is the ceiling of Table 2, ``oracle_task_policies``) and the objects its scenes held
+(``objects``: the colours, a choice scene's third block included).
 """
 from __future__ import annotations
 
@@ -143,11 +144,12 @@ def collect_task(policy: str | Path, goal: str, episodes: int, envs: int) -> tup
     if bundle.cfg.reward != "zsrm":
         raise ValueError(f"{policy} was trained with the {bundle.cfg.reward} reward; the multi-task data "
                          "comes from zsrm-trained policies")
-    vlm, rewards, parts = load_vlm(bundle.cfg.vlm), [], []
+    vlm, rewards, parts, objects = load_vlm(bundle.cfg.vlm), [], [], set()
     for start in range(0, episodes, envs):
         n, seed = min(envs, episodes - start), COLLECT_SEED + 1000 * index + start
         torch.manual_seed(seed)  # the policy samples its actions: same seed, same data
         recorder = DecisionRecorder(make_vec(bundle.cfg, n, seed), goal_camera(goal))
+        objects.update(*recorder.get_attr("objects"))  # every object in the scenes, distractors too
         venv = policy_view(recorder, vlm, bundle.cfg)
         try:
             result = run_vec_episodes(venv, lambda obs: bundle.act(obs, deterministic=bundle.cfg.eval_deterministic))
@@ -163,7 +165,7 @@ def collect_task(policy: str | Path, goal: str, episodes: int, envs: int) -> tup
     arrays["goal"] = np.array([TRAIN_TASKS[index].text])
     info = {"goal": TRAIN_TASKS[index].text, "task": index, "decisions": len(arrays["task"]),
             "episode_rewards": rewards, "camera": goal_camera(goal), "action_repeat": bundle.cfg.action_repeat,
-            **({"choice": True} if bundle.cfg.choice else {})}
+            "objects": sorted(objects), **({"choice": True} if bundle.cfg.choice else {})}
     return arrays, info
 
 

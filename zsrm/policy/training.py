@@ -25,7 +25,7 @@ from zsrm.common.files import read_json, write_json
 from zsrm.common.registry import load_weights
 from zsrm.policy.models import (CONDITIONINGS, IMAGE_VIEWS, KEYPOINT_VIEWS, DistilledPolicy, PolicyConfig,
                                 embed_goals, load_policy, save_policy)
-from zsrm.policy.rollouts import RolloutData
+from zsrm.policy.rollouts import RolloutData, train_task_index
 
 # cpu reads grey frames: the scene VLM's trunk, pretrained on which colours are present, gives features
 # so colour-bound that, read in colour, none of the paper's three follows a colour it never saw
@@ -139,6 +139,10 @@ def embedding_kind(cfg: DistillConfig, conditioning: str) -> str:
 
 
 def cloning_data(data: RolloutData, vlm, kinds) -> CloningData:
+    """The rollouts as :class:`CloningData`; a ValueError for a goal that is not a training task's
+    (a test task's blue words and frames never enter the distillation data)."""
+    for goal in data.goals:
+        train_task_index(goal)
     arrays = data.load()
     lookup = np.full(int(arrays["task"].max()) + 1, -1, np.int64)
     lookup[[int(info["task"]) for info in data.infos]] = np.arange(len(data.infos))
