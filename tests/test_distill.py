@@ -20,6 +20,8 @@ from zsrm.policy.rollouts import RolloutData, keep_task_policies, policy_folder,
 from zsrm.policy.training import DistillConfig, centres_text, load_distilled, random_crops
 from zsrm.rl import TrainConfig, train
 from zsrm.rl.envs import make_vec
+from zsrm.rl.features import policy_view
+from zsrm.rl.policy import PolicyBundle
 from zsrm.rl.sweep import trial_grid
 from zsrm.tasks.catalogue import TEST_TASKS, TRAIN_TASKS
 from zsrm.tasks.language import parse_goal
@@ -577,6 +579,71 @@ def test_table2_has_a_cell_per_relation_and_each_relations_ceiling(pipeline, tmp
     again = M.evaluate_policies({"language": policies["language"]}, load_vlm("scene"), splits, 2, progress=False,
                                 cache=cache)
     assert again["language"]["seen"]["train"]["relations"] == train["relations"]
+
+
+def test_dagger_relabels_the_students_frames_with_the_task_policies_actions(pipeline, tmp_path):
+    """zsrm's method: one round on two tasks, two student episodes each, one epoch."""
+    from zsrm.policy.dagger import Teacher, aggregate
+    from zsrm.policy.training import cloning_data
+    from zsrm.tasks.catalogue import TRAIN_COLOURS
+
+    out = tmp_path / "dagger"
+    shutil.copytree(pipeline / "distill" / "language", out / "language")  # its behaviour cloning, finished
+    args = build_parser().parse_args(["distill", "--dagger-rounds", "1", "--dagger-episodes", "2", "--dagger-epochs",
+                                      "1", "--epochs", "1", "--threads", "1", "--policies", "language",
+                                      "--data", str(pipeline / "rollouts"), "--out", str(out)])
+    assert from_namespace(args.options_class, args).run() == 0
+    round_1 = out / "dagger" / "language" / "round_1"
+    relabelled = np.load(round_1 / "relabelled.npz")
+    frames, actions, codes = relabelled["frames"], relabelled["actions"], relabelled["codes"]
+    assert sorted(set(codes.tolist())) == [0, 1] and len(frames) == len(actions) == len(codes)
+    record = json.loads((round_1 / "config.json").read_text())["training"]
+    bc = RolloutData(pipeline / "rollouts").load()
+    # The data grew by exactly the relabelled frames: the rollouts' and the student's.
+    assert record["relabelled"] == len(actions) and record["frames"] == len(bc["actions"]) + len(actions)
+    vlm = load_vlm("scene")
+    data = cloning_data(RolloutData(pipeline / "rollouts"), vlm, ["language"])
+    whole = aggregate(data, [{"frames": frames, "actions": actions, "codes": codes}])
+    assert len(whole.actions) == record["frames"] and torch.equal(whole.actions[len(data.actions):],
+                                                                  torch.from_numpy(actions))
+    student = load_policy(pipeline / "distill" / "language")
+    embeddings = embed_goals(vlm, GOALS)
+    for code, goal in enumerate(GOALS):
+        mine = codes == code
+        # Each frame's label is its task policy's action on that frame, not what the student did there.
+        bundle = PolicyBundle.load(policy_folder(pipeline / "policies", goal))
+        venv = make_vec(bundle.cfg, 1, 0)
+        expected = bundle.act(policy_view(venv, vlm, bundle.cfg).convert(frames[mine]), deterministic=True)
+        venv.close()
+        assert np.allclose(actions[mine], expected, atol=1e-6)
+        assert np.allclose(Teacher(policy_folder(pipeline / "policies", goal), goal).actions(frames[mine]), expected,
+                           atol=1e-6)
+        own = student.act(frames[mine][:10], embeddings[code:code + 1].expand(10, -1)).numpy()
+        assert not np.allclose(own, actions[mine][:10], atol=1e-3)
+    # The student's frames are of its two training tasks' scenes: no blue block, word or task.
+    assert set(record["objects"]) <= set(TRAIN_COLOURS) and not blue_pixels(frames).any()
+    assert set(record["student_reward"]) == set(GOALS)
+    # distill.json names the round's policy; eval-multitask scores it and says how it was distilled.
+    summary, policies = load_distilled(out)
+    assert summary["distillation"] == "dagger" and summary["policies"]["language"]["folder"] == \
+        "dagger/language/round_1"
+    assert summary["policies"]["language"]["behaviour_cloning"]["folder"] == "language"
+    after = load_policy(round_1)
+    assert all(torch.equal(a, b) for a, b in zip(policies["language"].state_dict().values(),
+                                                 after.state_dict().values()))
+    assert not all(torch.equal(a, b) for a, b in zip(student.state_dict().values(), after.state_dict().values()))
+    # A second run finds the round finished and leaves it as it is.
+    mtime = (round_1 / "model.safetensors").stat().st_mtime_ns
+    assert from_namespace(args.options_class, args).run() == 0
+    assert (round_1 / "model.safetensors").stat().st_mtime_ns == mtime
+    assert EvalMultitask(policies=str(out), data=str(pipeline / "rollouts"), seeds=1, tasks=1, threads=1,
+                         out=str(tmp_path / "table2.json")).run() == 0
+    assert json.loads((tmp_path / "table2.json").read_text())["distillation"] == "dagger"
+    assert "DAgger-style relabelling" in (tmp_path / "table2.md").read_text()
+    # Without its task policies DAgger has no labels: one line naming the folder.
+    with pytest.raises(FileNotFoundError, match="no task policy in .*nowhere"):
+        Distill(epochs=1, threads=1, policies=("language",), dagger_rounds=1, teachers=str(tmp_path / "nowhere"),
+                data=str(pipeline / "rollouts"), out=str(out)).run()
 
 
 def test_docstring_examples():

@@ -204,7 +204,10 @@ def table_markdown(table: dict) -> str:
               + (" The language policy reads each goal's embedding projected onto the training goals' span "
                  "(`--text-span`)." if "span" in table.get("language_text", "") else "")
               + (" Stacking goals in choice scenes (a third block beside the moved one)."
-                 if table.get("scenes") == "choice" else "")]
+                 if table.get("scenes") == "choice" else "")
+              + (f" Distilled with {table['dagger']['rounds']} rounds of DAgger-style relabelling after behaviour "
+                 "cloning (zsrm's method, `zsrm distill --dagger-rounds`), not the paper's behaviour cloning alone."
+                 if table.get("distillation") == "dagger" else "")]
     return "\n".join(lines + relations_markdown(table)) + "\n"
 
 

@@ -126,14 +126,28 @@ class Distill(DistillConfig):
     data: str = ROLLOUTS  # rollouts written by zsrm multitask-rollouts
     out: str = DISTILLED  # one folder per policy under here, and distill.json
     fresh: bool = False  # start over instead of resuming or skipping finished policies
+    dagger_rounds: int = 0
+    """zsrm's method, not the paper's: after behaviour cloning, rounds of DAgger-style relabelling (the
+    student's own frames labelled by the task policies, aggregated, trained on; OUT/dagger/); 0: the
+    paper's plain behaviour cloning"""
+    dagger_episodes: int = 10  # with --dagger-rounds: the student's episodes per training task per round
+    dagger_epochs: int = 2  # with --dagger-rounds: epochs over the aggregated data per round
+    teachers: str | None = None  # with --dagger-rounds: the task policies' folder (default: those the rollouts name)
 
     def run(self) -> int:
+        from zsrm.policy.dagger import DaggerConfig
         from zsrm.policy.training import distill
 
         check_writable(self.out, folder=True)
-        summary = distill(narrow(self, DistillConfig), self.data, self.out, fresh=self.fresh)
+        dagger = DaggerConfig(self.dagger_rounds, self.dagger_episodes, self.dagger_epochs) \
+            if self.dagger_rounds else None
+        summary = distill(narrow(self, DistillConfig), self.data, self.out, fresh=self.fresh, dagger=dagger,
+                          teachers=self.teachers)
         for name, p in summary["policies"].items():
-            print(f"{name}: final L2 loss {p['final_loss']:.4f}")
+            rounds = "".join(f"; round {r['round']}: {r['relabelled']} frames relabelled, student's oracle episode "
+                             f"reward {r['student_reward']:.1f}, loss {r['final_loss']:.4f}"
+                             for r in p.get("rounds", []))
+            print(f"{name}: final L2 loss {p['final_loss']:.4f}{rounds}")
         print(f"{summary['schedule']} schedule, {summary['tower']} tower, {summary['epochs']} epochs over "
               f"{summary['frames']} frames of {len(summary['goals'])} tasks; wrote {self.out}/")
         return 0
@@ -188,6 +202,8 @@ class EvalMultitask:
         table.update(schedule=summary["schedule"], tower=summary["tower"], **({"scenes": "choice"} if choice else {}),
                      **({"image_view": ", ".join(sorted(views))} if views else {}),
                      **language_text(policies),
+                     **({"distillation": "dagger", "dagger": summary["dagger"]}
+                        if summary.get("distillation") == "dagger" else {}),
                      oracle_task_policies=ceiling(data),
                      meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
                                     if "primitive" in policies else None))

@@ -255,16 +255,27 @@ def train_policy(cfg: DistillConfig, conditioning: str, data: CloningData, vlm, 
 
 
 def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progress: bool = True,
-            fresh: bool = False) -> dict:
+            fresh: bool = False, dagger=None, teachers: str | Path | None = None) -> dict:
     """Behaviour cloning of ``cfg.policies`` on the rollouts in ``data_folder``, each into
-    ``out/<conditioning>/``; writes and returns ``out/distill.json``."""
+    ``out/<conditioning>/``; writes and returns ``out/distill.json``. ``dagger`` (a
+    :class:`~zsrm.policy.dagger.DaggerConfig`): zsrm's method, rounds of DAgger-style relabelling
+    after that by the task policies (those the rollouts were collected with, or ``teachers``'),
+    and distill.json names each policy's last round."""
     from zsrm.vlm import load_vlm
 
     torch.set_num_threads(cfg.threads)
     vlm = load_vlm(cfg.vlm)
-    data = cloning_data(RolloutData(data_folder), vlm, [embedding_kind(cfg, name) for name in cfg.policies])
+    rollouts = RolloutData(data_folder)
+    data = cloning_data(rollouts, vlm, [embedding_kind(cfg, name) for name in cfg.policies])
     policies = {name: train_policy(cfg, name, data, vlm, Path(out) / name, progress, fresh)
                 for name in cfg.policies}
+    rounds = {}
+    if dagger is not None:
+        from zsrm.policy.dagger import Teacher, dagger_policy, teacher_folders
+
+        tutors = [Teacher(folder, goal) for folder, goal in zip(teacher_folders(rollouts, teachers), data.goals)]
+        rounds = {name: dagger_policy(cfg, dagger, name, data, vlm, tutors, Path(out), progress, fresh)
+                  for name in cfg.policies}
     summary = {"schedule": cfg.schedule, "tower": cfg.tower, "pretrained": cfg.pretrained, "epochs": cfg.epochs,
                "vlm": cfg.vlm, "text_embedding": cfg.text_embedding, "seed": cfg.seed,
                **({"centre_text": True} if "language" in cfg.policies and centres_text(cfg, "language", data.goals) else {}),
@@ -273,6 +284,16 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
                "frames": len(data.actions), "goals": data.goals,
                "policies": {name: {"folder": name, "final_loss": t["final_loss"]}
                             for name, t in policies.items()}}
+    if dagger is not None:
+        summary["distillation"] = "dagger"
+        summary["dagger"] = {k: v for k, v in asdict(dagger).items() if k != "envs"}
+        for name, records in rounds.items():
+            summary["policies"][name] = {
+                "folder": f"dagger/{name}/round_{len(records)}", "final_loss": records[-1]["final_loss"],
+                "behaviour_cloning": summary["policies"][name],
+                "rounds": [{k: r[k] for k in ("round", "frames", "relabelled", "final_loss")}
+                           | {"student_reward": float(np.mean(list(r["student_reward"].values())))}
+                           for r in records]}
     write_json(Path(out) / "distill.json", summary)
     return summary
 
@@ -282,4 +303,6 @@ def load_distilled(out: str | Path) -> tuple[dict, dict[str, DistilledPolicy]]:
     summary = read_json(Path(out) / "distill.json", "the summary of zsrm distill")
     if not isinstance(summary.get("policies"), dict) or not summary["policies"]:
         raise ValueError(f"{Path(out) / 'distill.json'} lists no policies; rerun zsrm distill")
-    return summary, {name: load_policy(Path(out) / name) for name in summary["policies"]}
+    # A DAgger run's policies are its last rounds' folders (zsrm.policy.dagger)
+    return summary, {name: load_policy(Path(out) / (entry.get("folder", name) if isinstance(entry, dict) else name))
+                     for name, entry in summary["policies"].items()}
