@@ -269,9 +269,9 @@ def test_collect_from_the_command_line(tmp_path, capsys):
 def test_stages_that_do_not_take_an_own_scene_yet_say_so_in_one_line(tmp_path, capsys):
     collect(CollectConfig(scene=SPEC, images=2, shard_size=2, episode_steps=2, record_every=1), tmp_path / "own",
             progress=False)
-    assert main(["label", str(tmp_path / "own"), "--vlm", "scene"]) == 2
+    assert main(["finetune", "--data", str(tmp_path / "own"), "--out", str(tmp_path / "model"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"holds data of your own scene ({SPEC}); zsrm label does not take" in err[0]
+    assert len(err) == 1 and f"holds data of your own scene ({SPEC}); zsrm finetune does not take" in err[0]
 
 
 def test_a_scene_from_its_xml_alone(tmp_path):
@@ -638,3 +638,73 @@ def test_zsrms_own_train_config_is_unchanged():
     from zsrm.rl import TrainConfig
 
     assert "scene" not in TrainConfig().to_dict() and TrainConfig().scene is None
+
+
+# --- labelling an own scene's data (zsrm label, zsrm eval-grounding) ---------------------------
+def _own_vlm(folder: Path) -> Path:
+    """A tiny untrained scene VLM that says it was taught the example's objects (as zsrm
+    pretrain-vlm --scene records them): what labelling reads of it, at no training cost."""
+    from zsrm.vlm.scene import create_scene_vlm
+
+    vlm = create_scene_vlm("tiny", seed=0)
+    vlm.meta = {"scene": SPEC, "objects": list(BODIES)}
+    vlm.save(folder)
+    return folder
+
+
+def test_label_an_own_scene_captions_its_phrases_and_its_oracle_is_the_scene_tasks(tmp_path, capsys):
+    from zsrm.envs.scene_task import holds_in_scene, scene_thresholds
+
+    data = collect(_tiny(), tmp_path / "own", progress=False)
+    assert list(data.table_homography[SPEC]) == ["tilted"]  # the adapter gives its table_height
+    vlm = _own_vlm(tmp_path / "vlm")
+    assert main(["label", str(tmp_path / "own"), "--vlm", str(vlm), "--quiet"]) == 0
+    captions, world = data.captions(), data.captions(oracle="world")
+    assert len(captions) == len(world) == 6 and any(captions)
+    for caption in {c for caps in captions + world + data.captions(oracle="pixel") for c in caps}:
+        assert parse_scene_goal(caption, PHRASES).text == caption  # the goal grammar over the adapter's phrases
+    manifest = json.loads((tmp_path / "own" / "labels" / "manifest.json").read_text())
+    own = manifest["own_scene"]
+    assert own["object_width"] == 0.05 and any("no silhouette refinement" in n for n in own["notes"])
+    # the oracle's captions are SceneTask's verdicts: true positions along the role cameras' own axes
+    arrays = data.load(["positions", "present"])
+    env = load_adapter(SPEC).make_env(tuple(OwnScene.cameras.values()), 64)
+    env.reset(seed=0)
+    for text in ("a red cylinder on the right of a purple cylinder", "a red cylinder close to an orange cylinder"):
+        goal = parse_scene_goal(text, PHRASES)
+        role = {"right_of": "front", "close_to": "tilted"}[goal.relation]
+        axes = role_axes(env.unwrapped.model, env.unwrapped.data, OwnScene.cameras[role], role)
+        idx = [PHRASES.index(p) for p in goal.objects]
+        for i in range(6):
+            holds = arrays["present"][i, idx].all() and holds_in_scene(
+                goal.relation, arrays["positions"][i, idx], axes, scene_thresholds(OwnScene.object_width))
+            assert (text in world[i]) == holds, (text, i)
+    env.close()
+    capsys.readouterr()
+    out = tmp_path / "grounding.json"
+    assert main(["eval-grounding", str(tmp_path / "own"), "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    for rel in ("right_of", "left_of", "close_to", "inside_of"):
+        assert f"f1_vs_world.{rel}" in report and f"support_world.{rel}" in report
+    assert report["meta"]["own_scene"]["adapter"] == SPEC
+    located = {k.rsplit(".", 1)[-1] for k in report if k.startswith("median_px_error_by_colour.front.")}
+    assert located and located <= set(PHRASES)
+
+
+def test_label_refuses_a_vlm_not_taught_the_scenes_objects_in_one_line(tmp_path, capsys):
+    collect(CollectConfig(scene=SPEC, images=2, shard_size=2, episode_steps=2, record_every=1), tmp_path / "own",
+            progress=False)
+    assert main(["label", str(tmp_path / "own"), "--vlm", "scene", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the VLM scene was never taught 'red cylinder' (it learnt red block" in err[0]
+    assert f"zsrm pretrain-vlm --scene {SPEC} --out FOLDER" in err[0]
+    assert not (tmp_path / "own" / "labels" / "manifest.json").exists()  # nothing labelled
+
+
+def test_label_refuses_data_whose_adapter_renamed_its_objects_in_one_line(tmp_path, capsys, monkeypatch):
+    collect(CollectConfig(scene=SPEC, images=2, shard_size=2, episode_steps=2, record_every=1), tmp_path / "own",
+            progress=False)
+    monkeypatch.setattr(OwnScene, "objects", ("red cylinder", "violet cylinder", "orange cylinder", "wooden bowl"))
+    assert main(["label", str(tmp_path / "own"), "--vlm", str(_own_vlm(tmp_path / "vlm")), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "objects are now red cylinder, violet cylinder" in err[0] and "collect the data again" in err[0]

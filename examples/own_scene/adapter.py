@@ -26,6 +26,7 @@ class OwnScene(SceneAdapter):
     objects = tuple(BODIES)
     cameras = {"front": "cam_front", "left": "cam_side", "tilted": "cam_high"}
     object_width = 0.05  # the cylinders' diameter
+    table_height = 0.30  # the table top: the labeler reads the high camera on it in metres
 
     def env_objects(self, phrases):
         return tuple(BODIES[p] for p in phrases)
@@ -48,3 +49,4 @@ class OwnSceneFromXml(SceneAdapter):
     bodies = BODIES
     cameras = {"front": "cam_front", "left": "cam_side", "tilted": "cam_high"}
     object_width = 0.05
+    table_height = 0.30

@@ -32,7 +32,7 @@ from zsrm.data.shards import ShardFolder, save_npz
 from zsrm.tasks.catalogue import SCENE_IDS
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.lexicon import BOX
-from zsrm.tasks.relations import CAMERAS
+from zsrm.tasks.relations import CAMERAS, TABLE_PLANE_CAMERAS
 
 # Box scenes whose reset drops a block into the box: random actions almost never do, and a box
 # that never holds a block teaches no "inside of".
@@ -303,9 +303,12 @@ def _record_own(out: dict, row: int, cfg: CollectConfig, env, obs) -> None:
 
 def _own_manifest(cfg: CollectConfig) -> dict:
     """What a dataset of a user's own scene records beside its shards: the objects, each role's
-    camera, and one object's width in pixels per role (measured at the objects' mean position
-    after the first reset; the labeler's pixel scale). No table calibration: see docs/own-scene.md."""
-    from zsrm.envs.cameras import object_width_px
+    camera, the adapter's object width and table height, and one object's width in pixels per
+    role (measured at the objects' mean position after the first reset; the labeler's pixel
+    scale). Where the adapter gives its ``table_height``, the tilted camera's table calibration
+    (:func:`zsrm.envs.cameras.table_homography` from the camera's pose, onto the plane of an
+    object's centre: the table plus half an object width); without it there is none."""
+    from zsrm.envs.cameras import object_width_px, table_homography
 
     adapter, envs = cfg.adapter, _Envs(cfg)
     try:
@@ -314,10 +317,16 @@ def _own_manifest(cfg: CollectConfig) -> dict:
         centre = np.mean(list(adapter.object_positions(env).values()), axis=0)
         widths = {role: object_width_px(env, adapter.roles[role], cfg.image_size, adapter.object_width / 2, centre)
                   for role in cfg.cameras}
+        table = {}
+        if adapter.table_height is not None:
+            height = adapter.table_height + adapter.object_width / 2
+            table = {role: table_homography(env, adapter.roles[role], cfg.image_size, height).tolist()
+                     for role in cfg.cameras if role in TABLE_PLANE_CAMERAS}
     finally:
         envs.close()
-    return {"colours": list(cfg.objects), "block_width_px": {cfg.scene: widths}, "table_homography": {},
-            "scene_adapter": {"name": adapter.name, "env_id": adapter.env_id, "cameras": adapter.roles}}
+    return {"colours": list(cfg.objects), "block_width_px": {cfg.scene: widths}, "table_homography": {cfg.scene: table},
+            "scene_adapter": {"name": adapter.name, "env_id": adapter.env_id, "cameras": adapter.roles,
+                              "object_width": adapter.object_width, "table_height": adapter.table_height}}
 
 
 def box_reference_point(xyz) -> np.ndarray:

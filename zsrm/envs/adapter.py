@@ -81,6 +81,7 @@ class SceneAdapter:
     cameras: Mapping[str, str] = {}  # Table 1 role (front, left, tilted) -> the env's camera name
     bodies: Mapping[str, str] = {}  # PRIVILEGED, optional: phrase -> the MuJoCo body whose position is the object's
     object_width: float = 0.06  # a typical object's width in metres (the labeler's pixel scale)
+    table_height: float | None = None  # world z (metres) of the surface the objects rest on: the labeler reads the tilted camera on it in metres; None: in pixels
     subsets: bool | None = None  # the env can hold any subset of the objects (None: yes with an env_id, no for a bare XML)
 
     @property
@@ -155,6 +156,9 @@ def check_adapter(adapter: SceneAdapter) -> SceneAdapter:
     if not (isinstance(adapter.object_width, (int, float)) and adapter.object_width > 0):
         raise SceneAdapterError(f"{adapter.name}: object_width must be a positive number of metres, "
                                 f"got {adapter.object_width!r}")
+    if adapter.table_height is not None and not isinstance(adapter.table_height, (int, float)):
+        raise SceneAdapterError(f"{adapter.name}: table_height must be a height in metres (world z) or None, "
+                                f"got {adapter.table_height!r}")
     if adapter.bodies and set(adapter.bodies) != set(adapter.objects):
         raise SceneAdapterError(f"{adapter.name}: bodies must name a body for each object and only those; "
                                 f"objects: {', '.join(adapter.objects)}; bodies: {', '.join(adapter.bodies)}")

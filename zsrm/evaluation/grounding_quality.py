@@ -26,9 +26,9 @@ from zsrm.data.shards import load_npz, read_manifest
 from zsrm.envs.cameras import apply_homography
 from zsrm.evaluation.metrics import auroc
 from zsrm.evaluation.plots import pyplot, save_figure
-from zsrm.grounding.annotate import Grounder, LabelConfig, gradcam_objects, labelers
+from zsrm.grounding.annotate import Grounder, LabelConfig, gradcam_objects, labelers, world_thresholds
 from zsrm.grounding.gradcam import grid_centres, locate
-from zsrm.grounding.labeler import RelationTable, pixel_thresholds, relation_tuples, world_table
+from zsrm.grounding.labeler import RelationTable, relation_tuples, world_table
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import COLOURS
 from zsrm.tasks.relations import RELATIONS
@@ -70,7 +70,7 @@ def _wrong_object(xy: np.ndarray, truth: np.ndarray, present: np.ndarray) -> flo
     d[~np.broadcast_to(present[:, None, :], d.shape)] = np.inf
     ok = present & np.isfinite(xy).all(-1)
     nearest = np.argmin(d, axis=-1)
-    return float((nearest != np.arange(len(COLOURS))[None])[ok].mean()) if ok.any() else float("nan")
+    return float((nearest != np.arange(present.shape[1])[None])[ok].mean()) if ok.any() else float("nan")
 
 
 def prf(pred: RelationTable, truth: RelationTable) -> dict[str, dict]:
@@ -87,9 +87,10 @@ def prf(pred: RelationTable, truth: RelationTable) -> dict[str, dict]:
     return out
 
 
-def _tables(data, cfg, pixels: dict, present, scene_index, world: bool = False, positions=None):
+def _tables(data, cfg, pixels: dict, present, scene_index, world: bool = False, positions=None, axes=None):
     """Relation tables over all images (scenes' labelers applied to their own rows), over the
-    data's objects (the colours, and the box where the data can hold it)."""
+    data's objects (the colours, and the box where the data can hold it; an own scene's
+    objects, its world table read along its role cameras' ``axes``)."""
     tuples = {r: relation_tuples(r, data.objects) for r in RELATIONS}
     holds = {r: np.zeros((len(present), len(tuples[r])), bool) for r in RELATIONS}
     for s, (scene, labeler) in enumerate(labelers(data, cfg).items()):
@@ -97,7 +98,7 @@ def _tables(data, cfg, pixels: dict, present, scene_index, world: bool = False, 
         if not len(rows):
             continue
         if world:
-            table = world_table(positions[rows], present[rows], data.objects, cfg.world_thresholds())
+            table = world_table(positions[rows], present[rows], data.objects, world_thresholds(data, cfg), axes=axes)
         else:
             table = labeler.table({c: xy[rows] for c, xy in pixels.items()}, present[rows])
         for r in RELATIONS:
@@ -108,9 +109,12 @@ def _tables(data, cfg, pixels: dict, present, scene_index, world: bool = False, 
 def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
     """The grounding report of a labelled dataset (see the module docstring)."""
     data = ExplorationData(data_folder)
-    data.require_zsrm_scenes("zsrm eval-grounding")
     manifest, lab = load_labels(data, labels)
     cfg = LabelConfig(**manifest["config"])
+    own = manifest.get("own_scene")  # an own scene's oracle axes and the labeler's notes
+    if data.scene_adapter and own is None:
+        raise ValueError(f"{data.labels_folder(labels)} was not labelled as an own scene's data: run zsrm label again")
+    axes = own["oracle_axes"] if own else None
     arr = data.load(["positions", "present", "scene"] + [f"pixels_{c}" for c in data.cameras] + data.box_keys)
     scene_index = arr["scene"]
     scene0 = data.scenes[0]
@@ -123,7 +127,7 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
     pixels = gradcam_objects(data, lab)
     truth_pixels = {c: objects[f"pixels_{c}"] for c in data.cameras}
     truth_table = _tables(data, cfg, truth_pixels, present, scene_index)
-    world = _tables(data, cfg, None, present, scene_index, world=True, positions=objects["positions"])
+    world = _tables(data, cfg, None, present, scene_index, world=True, positions=objects["positions"], axes=axes)
     pred = _tables(data, cfg, pixels, present, scene_index)
     vs_pixel, vs_world = prf(pred, truth_table), prf(pred, world)
     for key, of in (("f1", "f1"), ("precision", "precision"), ("recall", "recall"), ("support", "support")):
@@ -134,13 +138,20 @@ def evaluate_grounding(data_folder, labels: str | Path = LABELS) -> dict:
     report["relations"] = {"vs_true_pixels": vs_pixel, "vs_world": vs_world}
     report["notes"] = _notes(report)
     report["meta"] = _meta(data, manifest, list(lab[f"gradcam_map_{data.cameras[-1]}"].shape[-2:]))
+    if own:
+        report["meta"]["own_scene"] = {"adapter": own["name"], "objects": list(data.colours),
+                                       "object_width": own["object_width"], "labeler_notes": own["notes"],
+                                       "oracle": "f1_vs_world: against the scene's oracle, its objects' true "
+                                                 "positions (object_positions) read along each role camera's own "
+                                                 "axes (zsrm.envs.scene_task.role_axes) with thresholds scaled to "
+                                                 "object_width, as SceneTask's oracle reads them"}
     report["stacked_pairs"] = _stacked_pairs(pixels["front"], truth_pixels["front"], truth_table,
                                              labelers(data, cfg)[scene0].thresholds["front"])
     if data.table_homography.get(scene0):
         report["close_pairs"] = _close_pairs(data, cfg, lab["gradcam_xy_tilted"], arr["pixels_tilted"], arr["present"],
                                              scene_index)
-    report["meta"]["shortfalls"] = _shortfalls(report, cfg, data.block_width_px[scene0],
-                                               set(data.table_homography.get(scene0, {})))
+    report["meta"]["shortfalls"] = _shortfalls(report, labelers(data, cfg)[scene0].thresholds,
+                                               data.block_width_px[scene0], set(data.table_homography.get(scene0, {})))
     return report
 
 
@@ -163,7 +174,7 @@ def _localisation(data: ExplorationData, lab: dict, arr: dict) -> dict:
         report["wrong_object_rate"][cam] = _wrong_object(xy, truth, present)
         report["not_located_rate"][cam] = float(np.isinf(err[present]).mean())
         report["median_px_error_by_colour"][cam] = {
-            c: _summary(err[:, i])["median"] for i, c in enumerate(COLOURS) if present[:, i].any()}
+            c: _summary(err[:, i])["median"] for i, c in enumerate(data.colours) if present[:, i].any()}
         # The paper's state extractor: the argmax cell's geometric centre, from the stored maps.
         maps = lab[f"gradcam_map_{cam}"].astype(np.float32)
         plain = locate(maps, grid_centres(maps.shape[-2:], (size, size)), "argmax")
@@ -217,11 +228,11 @@ def _close_pairs(data, cfg, xy, truth, present, scene_index) -> dict:
             continue
         pts = {"true": apply_homography(h, truth[rows].astype(np.float64)),
                "gradcam": apply_homography(h, xy[rows].astype(np.float64))}
-        for a in range(len(COLOURS)):
-            for b in range(a + 1, len(COLOURS)):
+        for a in range(present.shape[1]):
+            for b in range(a + 1, present.shape[1]):
                 both = present[rows, a] & present[rows, b]
                 d = {k: np.linalg.norm(v[:, a] - v[:, b], axis=-1) for k, v in pts.items()}
-                close = both & (d["true"] < cfg.world_thresholds().close)
+                close = both & (d["true"] < world_thresholds(data, cfg).close)
                 for k in dist:
                     dist[k].append(d[k][close])
     d = {k: np.concatenate(v) if v else np.zeros(0) for k, v in dist.items()}
@@ -229,7 +240,7 @@ def _close_pairs(data, cfg, xy, truth, present, scene_index) -> dict:
         return {"n": 0}
     return {"n": int(len(d["true"])), "median_m_true": float(np.median(d["true"])),
             "median_m_gradcam": float(np.nanmedian(d["gradcam"])),
-            "share_over_close_gradcam": float((~(d["gradcam"] < cfg.world_thresholds().close)).mean())}
+            "share_over_close_gradcam": float((~(d["gradcam"] < world_thresholds(data, cfg).close)).mean())}
 
 
 def _notes(report: dict) -> list[str]:
@@ -271,7 +282,7 @@ def _stacked_pairs(xy: np.ndarray, truth: np.ndarray, table: RelationTable, thre
     return out
 
 
-def _shortfalls(report: dict, cfg: LabelConfig, widths: dict, table_cameras=frozenset()) -> list[str]:
+def _shortfalls(report: dict, px: dict, widths: dict, table_cameras=frozenset()) -> list[str]:
     """Which targets this report misses, and the numbers that say why: each short relation's
     camera's median Grad-CAM error against the pixel threshold its decision turns on."""
     out = []
@@ -282,7 +293,6 @@ def _shortfalls(report: dict, cfg: LabelConfig, widths: dict, table_cameras=froz
                    f"{report['median_px_error_argmax']['front']:.2f} px; the Grad-CAM layer's cells are "
                    f"{report['meta']['image_size'] / report['meta']['gradcam_grid'][-1]:.0f} px wide and {report['wrong_object_rate']['front']:.0%} "
                    "of front locations land nearer another object than the named one")
-    px = pixel_thresholds(widths, "block", cfg.world_thresholds(), table_cameras)
     for rel, f1 in report["f1"].items():
         need = 0.9 if rel in ("left_of", "right_of") else 0.8
         if f1 is not None and f1 >= need:

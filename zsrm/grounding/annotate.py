@@ -12,6 +12,13 @@ For every shard of a dataset folder, the labels folder (``DATA/labels`` by defau
   evaluation only: ``"pixel"`` (true pixel coordinates through the same rules and pixel
   thresholds) and ``"world"`` (the oracle on true world positions).
 
+Data of an own scene (``zsrm collect --scene``) are labelled the same way over its adapter's
+phrases ("a red mug close to a blue plate", the own-scene goal grammar): Grad-CAM of each
+phrase (the VLM must know them: ``zsrm pretrain-vlm --scene``, or real CLIP), pixel thresholds
+from the adapter's ``object_width``, the tilted camera read on the table where the adapter gives
+its ``table_height``; no silhouette refinement. The oracle's captions read the true positions
+along the role cameras' own axes, as its SceneTask oracle does (:func:`own_scene_record`).
+
 >>> import tempfile
 >>> from zsrm.data.collect import CollectConfig, collect
 >>> from zsrm.testing import ColourVLM
@@ -36,8 +43,7 @@ from zsrm.grounding.labeler import OBJECT_WIDTH, SpatialLabeler, pixel_threshold
 from zsrm.grounding.silhouette import Silhouette, calibrate, refine_points
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.lexicon import BOX
-from zsrm.tasks.language import COLOURS
-from zsrm.tasks.relations import WORLD_THRESHOLDS, Thresholds
+from zsrm.tasks.relations import RELATIONS, WORLD_THRESHOLDS, Thresholds
 from zsrm.vlm.factory import DEFAULT_VLM
 from zsrm.vlm.presence import BOX_PHRASE
 
@@ -66,7 +72,16 @@ class LabelConfig:
 
 
 def phrases_for(scene: str, colours) -> list[str]:
+    """The Grad-CAM phrases of a scene's objects: "red block" in zsrm's scenes; an own scene's
+    objects are their adapter's phrases already ("red mug")."""
+    if scene not in SCENE_SHAPES:
+        return list(colours)
     return [f"{c} {SCENE_SHAPES[scene]}" for c in colours]
+
+
+def caption_shape(scene: str) -> str | None:
+    """The shape zsrm's captions name in ``scene``; None for an own scene (its phrases)."""
+    return SCENE_SHAPES.get(scene)
 
 
 class Grounder:
@@ -75,8 +90,8 @@ class Grounder:
     def __init__(self, vlm, cfg: LabelConfig, data: ExplorationData, centres: list | None = None,
                  fine_centres: list | None = None, box_vlm=None, silhouettes: dict | None = None):
         self.cfg, self.data = cfg, data
-        # Colours the data can hold: the contrast of each phrase is against the other ones.
-        self.allowed = [c for c in COLOURS if c not in data.config["exclude"]]
+        # Colours (an own scene's objects) the data can hold: each phrase contrasts with the others.
+        self.allowed = [c for c in data.colours if c not in data.config["exclude"]]
         self.gradcam = {
             scene: GradCAM(vlm, target=cfg.target, contrast=phrases_for(scene, self.allowed), locate=cfg.locate,
                            cell_centres=cfg.cell_centres, presence_threshold=None, batch_size=cfg.batch_size,
@@ -108,7 +123,9 @@ class Grounder:
         # {scene: {camera: {"object": Silhouette, "box": Silhouette}}} of the table-plane cameras,
         # measured once (and kept in the labels manifest, so that a resumed run refines alike).
         self.silhouettes = {}
-        if cfg.refine == "silhouette":
+        # An own scene has no silhouettes: calibrating one renders each object alone at known
+        # table positions, which zsrm can do only in its own scenes (the labels manifest says so).
+        if cfg.refine == "silhouette" and not data.scene_adapter:
             if silhouettes is None:
                 silhouettes = {scene: calibrate_scene(data, scene) for scene in data.scenes}
             self.silhouettes = {scene: {cam: {k: Silhouette.from_json(v) if isinstance(v, dict) else v
@@ -125,8 +142,8 @@ class Grounder:
         0 for colours the data never holds. With the box (``arrays`` holding ``box_present``):
         ``gradcam_box_xy_<cam>`` (n, 2), ``gradcam_box_score_<cam>``, ``gradcam_box_peak_<cam>``
         (n,), ``gradcam_box_map_<cam>`` (n, h, w), NaN or 0 where the scene has no box."""
-        n, k = len(arrays["scene"]), len(COLOURS)
-        cols = [COLOURS.index(c) for c in self.allowed]
+        n, k = len(arrays["scene"]), len(self.data.colours)
+        cols = [self.data.colours.index(c) for c in self.allowed]
         out = {}
         for cam in self.data.cameras:
             xy = np.full((n, k, 2), np.nan, np.float32)
@@ -205,6 +222,11 @@ def labelers(data: ExplorationData, cfg: LabelConfig) -> dict[str, SpatialLabele
     out = {}
     for scene in data.scenes:
         table = data.table_homography.get(scene, {})
+        if data.scene_adapter:  # one width for all its objects, the adapter's; captions over its phrases
+            thresholds = pixel_thresholds(data.block_width_px[scene], world=world_thresholds(data, cfg),
+                                          table_cameras=table, object_width=own_object_width(data))
+            out[scene] = SpatialLabeler(thresholds, shape=None, colours=data.objects, table_homography=table)
+            continue
         thresholds = pixel_thresholds(data.block_width_px[scene], SCENE_SHAPES[scene], cfg.world_thresholds(), table)
         out[scene] = SpatialLabeler(thresholds, shape=SCENE_SHAPES[scene], colours=data.objects, table_homography=table)
     return out
@@ -224,14 +246,16 @@ def captions_from_pixels(data: ExplorationData, cfg: LabelConfig, pixels: dict, 
     return out
 
 
-def world_captions(data: ExplorationData, cfg: LabelConfig, positions, present, scene_index) -> list[list[str]]:
-    """The oracle's captions from true world positions (evaluation only)."""
+def world_captions(data: ExplorationData, cfg: LabelConfig, positions, present, scene_index,
+                   axes: dict | None = None) -> list[list[str]]:
+    """The oracle's captions from true world positions (evaluation only); an own scene's read
+    along its role cameras' ``axes`` (:func:`own_scene_record`), as its oracle reads them."""
     out: list[list[str]] = [[] for _ in range(len(present))]
     for s, scene in enumerate(data.scenes):
         rows = np.nonzero(scene_index == s)[0]
         if len(rows):
-            table = world_table(positions[rows], present[rows], data.objects, cfg.world_thresholds())
-            for r, cap in zip(rows, table.captions(SCENE_SHAPES[scene])):
+            table = world_table(positions[rows], present[rows], data.objects, world_thresholds(data, cfg), axes=axes)
+            for r, cap in zip(rows, table.captions(caption_shape(scene))):
                 out[r] = cap
     return out
 
@@ -242,7 +266,6 @@ def label_dataset(data_folder, cfg: LabelConfig, out: str | Path = LABELS, vlm=N
     from tqdm import tqdm
 
     data = ExplorationData(data_folder)
-    data.require_zsrm_scenes("zsrm label")
     if not data.shards:
         raise ValueError(f"{data_folder} holds no finished shard: run zsrm collect first")
     folder = data.labels_folder(out)
@@ -252,8 +275,11 @@ def label_dataset(data_folder, cfg: LabelConfig, out: str | Path = LABELS, vlm=N
         vlm = load_vlm(cfg.vlm)
     box_spec = cfg.box_vlm or (BOX_VLM if cfg.vlm == DEFAULT_VLM else None)
     box_vlm = load_vlm(box_spec) if box_spec is not None and data.has_box else None
-    shards = ShardFolder(folder, kind="labels", config=asdict(cfg), n_shards=data.manifest["n_shards"],
-                         extra={"data": str(Path(data_folder).resolve())})
+    extra = {"data": str(Path(data_folder).resolve())}
+    if data.scene_adapter:
+        extra["own_scene"] = own_scene_record(data, cfg, vlm)
+    shards = ShardFolder(folder, kind="labels", config=asdict(cfg), n_shards=data.manifest["n_shards"], extra=extra)
+    axes = shards.manifest["own_scene"]["oracle_axes"] if data.scene_adapter else None
     grounder = Grounder(vlm, cfg, data, shards.manifest.get("centres"), shards.manifest.get("fine_centres"),
                         box_vlm=box_vlm, silhouettes=shards.manifest.get("silhouettes"))
     shards.manifest.setdefault("centres", grounder.centres.tolist())
@@ -276,7 +302,7 @@ def label_dataset(data_folder, cfg: LabelConfig, out: str | Path = LABELS, vlm=N
             # Evaluation only: what the true coordinates say.
             truth_pixel = captions_from_pixels(data, cfg, {c: objects[f"pixels_{c}"] for c in data.cameras},
                                                objects["present"], arrays["scene"])
-            truth_world = world_captions(data, cfg, objects["positions"], objects["present"], arrays["scene"])
+            truth_world = world_captions(data, cfg, objects["positions"], objects["present"], arrays["scene"], axes)
             save_npz(shards.path(index, ".npz"), **grad)
             save_json(shards.path(index, ".json", sub=ORACLE), {"pixel": truth_pixel, "world": truth_world})
             save_json(shards.path(index, ".json"), {"captions": captions})
@@ -297,3 +323,72 @@ def gradcam_objects(data: ExplorationData, grad: dict) -> dict[str, np.ndarray]:
 
 def shard_done(data: ExplorationData, index: int) -> bool:
     return f"shard_{index:05d}" in data.manifest["shards"]
+
+
+# --- an own scene (zsrm collect --scene) --------------------------------------------------------
+def own_object_width(data: ExplorationData) -> float:
+    """An own scene's object width in metres: as zsrm collect recorded it, else its adapter's."""
+    info = data.manifest["scene_adapter"]
+    if "object_width" in info:
+        return float(info["object_width"])
+    from zsrm.envs.adapter import load_adapter
+
+    return float(load_adapter(info["name"]).object_width)
+
+
+def world_thresholds(data: ExplorationData, cfg: LabelConfig) -> Thresholds:
+    """Table 1's thresholds in metres for the data: the configured ones (set for zsrm's 6 cm
+    blocks), scaled to an own scene's object width as its oracle scales them (scene_thresholds)."""
+    if not data.scene_adapter:
+        return cfg.world_thresholds()
+    from zsrm.envs.scene_task import REFERENCE_WIDTH
+
+    return cfg.world_thresholds().scaled(own_object_width(data) / REFERENCE_WIDTH)
+
+
+def check_vlm_knows(vlm, phrases, spec: str, scene: str) -> None:
+    """A scene stand-in VLM must have been taught the phrases (zsrm pretrain-vlm --scene); real
+    CLIP knows the words. One line naming the first phrase it was not taught."""
+    if getattr(vlm, "backend", None) != "scene":
+        return
+    meta = getattr(vlm, "meta", None) or {}
+    known = meta.get("objects") or [f"{c} {s}" for c in meta.get("colours", ()) for s in ("block", "puck")]
+    missing = [p for p in phrases if p not in known]
+    if missing:
+        learnt = f"it learnt {', '.join(known)}" if known else "it names no objects it learnt"
+        raise ValueError(f"the VLM {spec} was never taught {missing[0]!r} ({learnt}): pretrain one on your scene "
+                         f"with zsrm pretrain-vlm --scene {scene} --out FOLDER and label with --vlm FOLDER")
+
+
+def own_scene_record(data: ExplorationData, cfg: LabelConfig, vlm) -> dict:
+    """Before labelling an own scene's data: its adapter still names the data's objects and the
+    VLM knows them. Returns what the labels manifest records: the object width, the oracle's
+    axes of each role's camera (evaluation only: :func:`zsrm.envs.scene_task.role_axes`, read
+    off the env's cameras as SceneTask's oracle reads them) and notes on what zsrm's own labeler
+    has that this one lacks."""
+    from zsrm.envs.adapter import SceneAdapterError, load_adapter
+    from zsrm.envs.scene_task import role_axes
+
+    adapter = load_adapter(data.scene_adapter)
+    if tuple(adapter.objects) != data.colours:
+        raise SceneAdapterError(f"{data.folder} holds {', '.join(data.colours)}, but {adapter.name}'s objects are now "
+                                f"{', '.join(adapter.objects)}: collect the data again")
+    phrases = [p for p in data.colours if p not in data.config["exclude"]]
+    check_vlm_knows(vlm, phrases, cfg.vlm, adapter.name)
+    env = adapter.make_env(tuple(adapter.roles[r] for r in data.cameras), data.config["image_size"], tuple(phrases))
+    try:
+        env.reset(seed=0)  # the cameras' poses; where the objects are is not read
+        base = env.unwrapped
+        axes = {r: role_axes(base.model, base.data, adapter.roles[r], r).tolist() for r in data.cameras}
+    finally:
+        env.close()
+    tilted = [RELATIONS[r].name for r in RELATIONS if RELATIONS[r].camera == "tilted"]
+    notes = ["one object width for every object (the adapter's object_width, "
+             f"{own_object_width(data):g} m), where zsrm's scenes have one per shape"]
+    if cfg.refine == "silhouette":
+        notes.append("no silhouette refinement: calibrating it renders each object alone at known table positions, "
+                     "which zsrm can do only in its own scenes; the tilted camera reads Grad-CAM's points")
+    if not any(data.table_homography.get(s) for s in data.scenes):
+        notes.append(f"the tilted camera ({', '.join(tilted)}) is read in pixels: the adapter gives no table_height, "
+                     "so the data have no table calibration and pixel distances shrink with depth")
+    return {"name": adapter.name, "object_width": own_object_width(data), "oracle_axes": axes, "notes": notes}

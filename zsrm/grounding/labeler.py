@@ -27,6 +27,7 @@ import numpy as np
 from zsrm.tasks.language import COLOURS, Task
 from zsrm.tasks.lexicon import CONTAINERS
 from zsrm.tasks.relations import CAMERAS, RELATIONS, WORLD_THRESHOLDS, Thresholds, camera_plane
+from zsrm.tasks.scene_goals import SceneGoal
 
 # Object widths (metres) of the scenes' shapes: the world thresholds are in metres.
 OBJECT_WIDTH = {"block": 0.06, "puck": 0.07}
@@ -38,17 +39,20 @@ CONTAINER_RELATIONS = frozenset({"inside_of"})
 
 
 def pixel_thresholds(block_width_px: Mapping[str, float], shape: str = "block",
-                     world: Thresholds = WORLD_THRESHOLDS, table_cameras=()) -> dict[str, Thresholds]:
+                     world: Thresholds = WORLD_THRESHOLDS, table_cameras=(),
+                     object_width: float | None = None) -> dict[str, Thresholds]:
     """Per-camera pixel thresholds: the world thresholds scaled by pixels per metre, measured
-    as an object's width in pixels on that camera over its width in metres. Cameras in
-    ``table_cameras`` are read in table metres (see :class:`SpatialLabeler`) and keep ``world``."""
-    if shape not in OBJECT_WIDTH:
+    as an object's width in pixels on that camera over its width in metres (the shape's, or
+    ``object_width``: an own scene's adapter's). Cameras in ``table_cameras`` are read in table
+    metres (see :class:`SpatialLabeler`) and keep ``world``."""
+    if object_width is None and shape not in OBJECT_WIDTH:
         raise ValueError(f"unknown shape {shape!r}; known shapes: {', '.join(OBJECT_WIDTH)}")
+    metres = OBJECT_WIDTH[shape] if object_width is None else object_width
     out = {}
     for camera, width in block_width_px.items():
         if not width > 0:
             raise ValueError(f"block width on camera {camera!r} must be positive, got {width}")
-        out[camera] = world if camera in table_cameras else world.scaled(width / OBJECT_WIDTH[shape])
+        out[camera] = world if camera in table_cameras else world.scaled(width / metres)
     return out
 
 
@@ -95,8 +99,14 @@ def pixel_planes(pixels: Mapping[str, np.ndarray], table_homography: Mapping[str
     return out
 
 
-def world_planes(positions: np.ndarray, cameras: Sequence[str] = CAMERAS) -> dict[str, np.ndarray]:
-    """True world positions (..., 3) -> each camera's plane, as the oracle reads them."""
+def world_planes(positions: np.ndarray, cameras: Sequence[str] = CAMERAS,
+                 axes: Mapping[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+    """True world positions (..., 3) -> each camera's plane, as the oracle reads them: zsrm's
+    :func:`~zsrm.tasks.relations.camera_plane`, or along ``axes`` (camera -> (2, 3) world
+    directions: an own scene's :func:`zsrm.envs.scene_task.role_axes`)."""
+    if axes is not None:
+        return {camera: np.asarray(positions, np.float64) @ np.asarray(axes[camera], np.float64).T
+                for camera in cameras}
     return {camera: camera_plane(positions, camera) for camera in cameras}
 
 
@@ -112,8 +122,9 @@ class RelationTable:
     tuples: dict[str, np.ndarray]
     holds: dict[str, np.ndarray]
 
-    def captions(self, shape: str = "block") -> list[list[str]]:
-        """Every caption that holds, per image, as canonical goal sentences."""
+    def captions(self, shape: str | None = "block") -> list[list[str]]:
+        """Every caption that holds, per image, as canonical goal sentences: of zsrm's ``shape``,
+        or with ``shape=None`` over an own scene's phrases (:class:`~zsrm.tasks.scene_goals.SceneGoal`)."""
         n = next(iter(self.holds.values())).shape[0] if self.holds else 0
         out: list[list[str]] = [[] for _ in range(n)]
         for relation, holds in self.holds.items():
@@ -122,7 +133,8 @@ class RelationTable:
             texts: dict[int, str] = {}
             for img, t in zip(*np.nonzero(holds)):
                 if t not in texts:
-                    texts[t] = Task(relation, [self.colours[i] for i in self.tuples[relation][t]], shape).text
+                    objects = [self.colours[i] for i in self.tuples[relation][t]]
+                    texts[t] = (SceneGoal(relation, objects) if shape is None else Task(relation, objects, shape)).text
                 out[img].append(texts[t])
         return out
 
@@ -166,13 +178,14 @@ class SpatialLabeler:
     """Captions from object pixel coordinates on the front, left and tilted cameras.
 
     thresholds: camera -> pixel :class:`Thresholds` (see :func:`pixel_thresholds`).
+    shape: zsrm's shape the captions name (``None``: an own scene's phrases, ``colours``).
     table_homography: camera -> 3x3 pixel-to-table map. Those cameras' coordinates are read
     in metres on the table, so their thresholds must be in metres: on the tilted camera a
     pixel distance means twice as much at the far edge of the table as at the near one, and
     with one pixel threshold "close to" labels had precision 0.29 even from true coordinates.
     """
 
-    def __init__(self, thresholds: Mapping[str, Thresholds], shape: str = "block",
+    def __init__(self, thresholds: Mapping[str, Thresholds], shape: str | None = "block",
                  colours: Sequence[str] = COLOURS, relations: Sequence[str] = tuple(RELATIONS),
                  table_homography: Mapping[str, np.ndarray] | None = None):
         missing = {RELATIONS[r].camera for r in relations} - set(thresholds)
@@ -215,7 +228,9 @@ class SpatialLabeler:
 
 
 def world_table(positions: np.ndarray, present: np.ndarray, colours: Sequence[str] = COLOURS,
-                thresholds: Thresholds = WORLD_THRESHOLDS, relations: Sequence[str] = tuple(RELATIONS)) -> RelationTable:
-    """The oracle's table from true world positions (N, K, 3), in metres."""
-    planes = world_planes(np.asarray(positions, dtype=np.float64))
+                thresholds: Thresholds = WORLD_THRESHOLDS, relations: Sequence[str] = tuple(RELATIONS),
+                axes: Mapping[str, np.ndarray] | None = None) -> RelationTable:
+    """The oracle's table from true world positions (N, K, 3), in metres (read along ``axes``
+    where given, see :func:`world_planes`)."""
+    planes = world_planes(np.asarray(positions, dtype=np.float64), axes=axes)
     return relation_table(planes, present, {c: thresholds for c in CAMERAS}, colours, relations)

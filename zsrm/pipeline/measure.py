@@ -234,6 +234,11 @@ class EvalGrounding:
 
         if not Path(self.data).is_dir():
             raise FileNotFoundError(f"no dataset folder {self.data}: run zsrm collect and zsrm label first")
+        if self.figure:
+            from zsrm.data.dataset import ExplorationData
+
+            if ExplorationData(self.data).scene_adapter:  # Figure 3 shows zsrm's red and yellow blocks
+                raise ValueError(f"--figure draws zsrm's red and yellow blocks; {self.data} holds your own scene's data")
         for path in (self.out, self.figure, self.csv and f"{self.csv}_cameras.csv"):
             if path:
                 files.check_writable(path)
