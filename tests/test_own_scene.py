@@ -665,7 +665,8 @@ def test_label_an_own_scene_captions_its_phrases_and_its_oracle_is_the_scene_tas
         assert parse_scene_goal(caption, PHRASES).text == caption  # the goal grammar over the adapter's phrases
     manifest = json.loads((tmp_path / "own" / "labels" / "manifest.json").read_text())
     own = manifest["own_scene"]
-    assert own["object_width"] == 0.05 and any("no silhouette refinement" in n for n in own["notes"])
+    assert own["object_width"] == 0.05 and any("silhouette refinement uncalibrated" in n for n in own["notes"])
+    assert manifest["silhouettes"][SPEC]["tilted"]["object"]["offset"] == [0.0, 0.0]
     # the oracle's captions are SceneTask's verdicts: true positions along the role cameras' own axes
     arrays = data.load(["positions", "present"])
     env = load_adapter(SPEC).make_env(tuple(OwnScene.cameras.values()), 64)

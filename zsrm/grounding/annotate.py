@@ -16,7 +16,7 @@ Data of an own scene (``zsrm collect --scene``) are labelled the same way over i
 phrases ("a red mug close to a blue plate", the own-scene goal grammar): Grad-CAM of each
 phrase (the VLM must know them: ``zsrm pretrain-vlm --scene``, or real CLIP), pixel thresholds
 from the adapter's ``object_width``, the tilted camera read on the table where the adapter gives
-its ``table_height``; no silhouette refinement. The oracle's captions read the true positions
+its ``table_height``, its points refined to their silhouettes uncalibrated (:func:`own_silhouettes`). The oracle's captions read the true positions
 along the role cameras' own axes, as its SceneTask oracle does (:func:`own_scene_record`).
 
 >>> import tempfile
@@ -43,7 +43,7 @@ from zsrm.grounding.labeler import OBJECT_WIDTH, SpatialLabeler, pixel_threshold
 from zsrm.grounding.silhouette import Silhouette, calibrate, refine_points
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.lexicon import BOX
-from zsrm.tasks.relations import RELATIONS, WORLD_THRESHOLDS, Thresholds
+from zsrm.tasks.relations import RELATIONS, TABLE_PLANE_CAMERAS, WORLD_THRESHOLDS, Thresholds
 from zsrm.vlm.factory import DEFAULT_VLM
 from zsrm.vlm.presence import BOX_PHRASE
 
@@ -123,11 +123,10 @@ class Grounder:
         # {scene: {camera: {"object": Silhouette, "box": Silhouette}}} of the table-plane cameras,
         # measured once (and kept in the labels manifest, so that a resumed run refines alike).
         self.silhouettes = {}
-        # An own scene has no silhouettes: calibrating one renders each object alone at known
-        # table positions, which zsrm can do only in its own scenes (the labels manifest says so).
-        if cfg.refine == "silhouette" and not data.scene_adapter:
+        if cfg.refine == "silhouette":
             if silhouettes is None:
-                silhouettes = {scene: calibrate_scene(data, scene) for scene in data.scenes}
+                silhouettes = {scene: own_silhouettes(data, scene) if data.scene_adapter else calibrate_scene(data, scene)
+                               for scene in data.scenes}
             self.silhouettes = {scene: {cam: {k: Silhouette.from_json(v) if isinstance(v, dict) else v
                                               for k, v in sils.items()} for cam, sils in cams.items()}
                                 for scene, cams in silhouettes.items()}
@@ -212,6 +211,15 @@ def calibrate_scene(data: ExplorationData, scene: str) -> dict[str, dict[str, Si
         return out
     finally:
         env.close()
+
+
+def own_silhouettes(data: ExplorationData, scene: str) -> dict[str, dict[str, Silhouette]]:
+    """An own scene's silhouettes on its table-plane cameras, uncalibrated: a window of one
+    object width, no offset, never treated as partly hidden. zsrm measures offset and area on
+    renders of each object alone at known table positions (:func:`calibrate_scene`), which an
+    own scene's env does not offer; the images alone give the region's centroid."""
+    return {cam: {"object": Silhouette(half_window=float(round(data.block_width_px[scene][cam])))}
+            for cam in data.cameras if cam in TABLE_PLANE_CAMERAS}
 
 
 def labelers(data: ExplorationData, cfg: LabelConfig) -> dict[str, SpatialLabeler]:
@@ -386,8 +394,10 @@ def own_scene_record(data: ExplorationData, cfg: LabelConfig, vlm) -> dict:
     notes = ["one object width for every object (the adapter's object_width, "
              f"{own_object_width(data):g} m), where zsrm's scenes have one per shape"]
     if cfg.refine == "silhouette":
-        notes.append("no silhouette refinement: calibrating it renders each object alone at known table positions, "
-                     "which zsrm can do only in its own scenes; the tilted camera reads Grad-CAM's points")
+        notes.append("silhouette refinement uncalibrated: the tilted camera's points move to the centroid of the "
+                     "object's colour region around them, with no offset (zsrm measures it on renders of each object "
+                     "alone at known table positions, which an own scene's env does not offer) and one window for "
+                     "every object")
     if not any(data.table_homography.get(s) for s in data.scenes):
         notes.append(f"the tilted camera ({', '.join(tilted)}) is read in pixels: the adapter gives no table_height, "
                      "so the data have no table calibration and pixel distances shrink with depth")
