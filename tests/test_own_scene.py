@@ -709,3 +709,21 @@ def test_label_refuses_data_whose_adapter_renamed_its_objects_in_one_line(tmp_pa
     assert main(["label", str(tmp_path / "own"), "--vlm", str(_own_vlm(tmp_path / "vlm")), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "objects are now red cylinder, violet cylinder" in err[0] and "collect the data again" in err[0]
+
+
+def test_without_a_table_height_the_tilted_camera_is_read_in_pixels(tmp_path, monkeypatch):
+    from zsrm.grounding.annotate import LabelConfig, label_dataset, labelers
+    from zsrm.vlm import load_vlm
+
+    monkeypatch.setattr(OwnScene, "table_height", None)
+    data = collect(CollectConfig(scene=SPEC, images=2, shard_size=2, episode_steps=2, record_every=1), tmp_path / "own",
+                   progress=False)
+    assert data.table_homography == {SPEC: {}}
+    vlm = _own_vlm(tmp_path / "vlm")
+    label_dataset(tmp_path / "own", LabelConfig(vlm=str(vlm)), vlm=load_vlm(str(vlm)), progress=False)
+    notes = json.loads((tmp_path / "own" / "labels" / "manifest.json").read_text())["own_scene"]["notes"]
+    assert any("tilted camera (close_to, inside_of) is read in pixels" in n for n in notes)
+    # pixel thresholds: the world ones scaled to the object width (5 cm) and its width in pixels there
+    tilted = labelers(data, LabelConfig())[SPEC].thresholds["tilted"]
+    width_px = data.block_width_px[SPEC]["tilted"]
+    assert tilted.close == pytest.approx(0.10 * (0.05 / 0.06) * width_px / 0.05)

@@ -14,6 +14,9 @@ An adapter says, for one gymnasium env:
   camera; the tilted one looks 45 degrees down onto the table);
 * where exploration actions come from: :meth:`SceneAdapter.exploration_action` (uniform
   random by default);
+* its geometry, for the labeler: :attr:`SceneAdapter.object_width` (a typical object's width)
+  and, optionally, :attr:`SceneAdapter.table_height` (the surface the objects rest on: the
+  tilted camera is then read on the table in metres);
 * one privileged accessor, :meth:`SceneAdapter.object_positions`: the objects' true world
   positions (by default those of the bodies :attr:`SceneAdapter.bodies` names). ONLY the oracle, evaluation, and the scene stand-in VLM's presence-caption
   pretraining may call it. No reward model and no policy ever reads it: they get the
