@@ -255,7 +255,10 @@ class EvalGrounding:
             print(f"{cam:7s} median error {report['median_px_error'][cam]:.2f} px "
                   f"(block {report['block_width_px'][cam]:.1f} px), p90 {report['p90_px_error'][cam]:.2f} px")
         for rel, f1 in report["f1"].items():
-            print(f"{rel:12s} F1 {'n/a' if f1 is None else f'{f1:.3f}'}  (support {report['support'][rel]})")
+            oracle = report["f1_vs_world"][rel]
+            print(f"{rel:12s} F1 {'n/a' if f1 is None else f'{f1:.3f}'}  (support {report['support'][rel]}); "
+                  f"against the oracle {'n/a' if oracle is None else f'{oracle:.3f}'}  "
+                  f"(support {report['support_world'][rel]})")
         for note in report["notes"]:
             print("note:", note)
         print(f"wrote {out}" + (f" and {self.figure}" if self.figure else ""))
