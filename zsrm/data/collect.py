@@ -304,29 +304,45 @@ def _record_own(out: dict, row: int, cfg: CollectConfig, env, obs) -> None:
 def _own_manifest(cfg: CollectConfig) -> dict:
     """What a dataset of a user's own scene records beside its shards: the objects, each role's
     camera, the adapter's object width and table height, and one object's width in pixels per
-    role (measured at the objects' mean position after the first reset; the labeler's pixel
-    scale). Where the adapter gives its ``table_height``, the tilted camera's table calibration
-    (:func:`zsrm.envs.cameras.table_homography` from the camera's pose, onto the plane of an
-    object's centre: the table plus half an object width); without it there is none."""
+    role (the labeler's pixel scale). Where the adapter gives its ``table_height``, the width is
+    measured where the tilted camera looks at the plane of an object's centre (the table plus
+    half an object width), and the tilted camera's table calibration
+    (:func:`zsrm.envs.cameras.table_homography`, from the camera's pose) maps onto that plane:
+    geometry only. Without it there is no calibration, and the width is measured at the
+    objects' mean position after the first reset (the privileged accessor, read once here)."""
     from zsrm.envs.cameras import object_width_px, table_homography
 
     adapter, envs = cfg.adapter, _Envs(cfg)
     try:
         env = envs.get(cfg.scene, cfg.objects)
         env.reset(seed=cfg.seed)
-        centre = np.mean(list(adapter.object_positions(env).values()), axis=0)
-        widths = {role: object_width_px(env, adapter.roles[role], cfg.image_size, adapter.object_width / 2, centre)
-                  for role in cfg.cameras}
-        table = {}
+        table, centre = {}, None
         if adapter.table_height is not None:
             height = adapter.table_height + adapter.object_width / 2
             table = {role: table_homography(env, adapter.roles[role], cfg.image_size, height).tolist()
                      for role in cfg.cameras if role in TABLE_PLANE_CAMERAS}
+            centre = _looked_at(env, adapter.roles["tilted"], height)
+        if centre is None:
+            centre = np.mean(list(adapter.object_positions(env).values()), axis=0)
+        widths = {role: object_width_px(env, adapter.roles[role], cfg.image_size, adapter.object_width / 2, centre)
+                  for role in cfg.cameras}
     finally:
         envs.close()
     return {"colours": list(cfg.objects), "block_width_px": {cfg.scene: widths}, "table_homography": {cfg.scene: table},
             "scene_adapter": {"name": adapter.name, "env_id": adapter.env_id, "cameras": adapter.roles,
                               "object_width": adapter.object_width, "table_height": adapter.table_height}}
+
+
+def _looked_at(env, camera: str, height: float) -> np.ndarray | None:
+    """Where ``camera``'s view axis meets the horizontal plane at ``height`` (None if it does
+    not look down onto it)."""
+    from zsrm.envs.cameras import camera_frame
+
+    pos, rot, _ = camera_frame(env, camera)
+    view = -rot[:, 2]  # the camera looks down its -z axis
+    if view[2] >= -1e-6 or pos[2] <= height:
+        return None
+    return pos + view * (height - pos[2]) / view[2]
 
 
 def box_reference_point(xyz) -> np.ndarray:
