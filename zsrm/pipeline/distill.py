@@ -135,14 +135,13 @@ class Distill(DistillConfig):
     teachers: str | None = None  # with --dagger-rounds: the task policies' folder (default: those the rollouts name)
 
     def run(self) -> int:
-        from zsrm.policy.dagger import DaggerConfig
+        from zsrm.policy.dagger import Dagger, DaggerConfig
         from zsrm.policy.training import distill
 
         check_writable(self.out, folder=True)
-        dagger = DaggerConfig(self.dagger_rounds, self.dagger_episodes, self.dagger_epochs) \
+        dagger = Dagger(DaggerConfig(self.dagger_rounds, self.dagger_episodes, self.dagger_epochs), self.teachers) \
             if self.dagger_rounds else None
-        summary = distill(narrow(self, DistillConfig), self.data, self.out, fresh=self.fresh, dagger=dagger,
-                          teachers=self.teachers)
+        summary = distill(narrow(self, DistillConfig), self.data, self.out, fresh=self.fresh, dagger=dagger)
         for name, p in summary["policies"].items():
             rounds = "".join(f"; round {r['round']}: {r['relabelled']} frames relabelled, student's oracle episode "
                              f"reward {r['student_reward']:.1f}, loss {r['final_loss']:.4f}"

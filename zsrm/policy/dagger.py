@@ -48,6 +48,25 @@ class DaggerConfig:
             raise ValueError("dagger rounds, episodes, epochs and envs must be >= 1")
 
 
+class Dagger:
+    """The DAgger rounds of every policy of a ``zsrm distill`` run, as
+    :func:`zsrm.policy.training.distill` calls them after behaviour cloning; ``teachers``: the task
+    policies' folder (default: those the rollouts were collected with)."""
+
+    def __init__(self, config: DaggerConfig, teachers: str | Path | None = None):
+        self.config, self.teachers = config, teachers
+
+    def __call__(self, cfg: DistillConfig, data: CloningData, vlm, rollouts, out: Path, progress: bool,
+                 fresh: bool) -> dict[str, list[dict]]:
+        tutors = [Teacher(folder, goal) for folder, goal in zip(teacher_folders(rollouts, self.teachers), data.goals)]
+        return {name: dagger_policy(cfg, self.config, name, data, vlm, tutors, Path(out), progress, fresh)
+                for name in cfg.policies}
+
+    def settings(self) -> dict:
+        """What distill.json records of the method (the envs stepped together change nothing)."""
+        return {k: v for k, v in asdict(self.config).items() if k != "envs"}
+
+
 def teacher_folders(rollouts, teachers: str | Path | None = None) -> list[str]:
     """Each goal's task policy (in ``rollouts.goals`` order): the folder its rollouts were collected
     with, or ``teachers``' (a folder of kept task policies, as ``zsrm multitask-policies`` keeps them)."""

@@ -255,12 +255,12 @@ def train_policy(cfg: DistillConfig, conditioning: str, data: CloningData, vlm, 
 
 
 def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progress: bool = True,
-            fresh: bool = False, dagger=None, teachers: str | Path | None = None) -> dict:
+            fresh: bool = False, dagger=None) -> dict:
     """Behaviour cloning of ``cfg.policies`` on the rollouts in ``data_folder``, each into
     ``out/<conditioning>/``; writes and returns ``out/distill.json``. ``dagger`` (a
-    :class:`~zsrm.policy.dagger.DaggerConfig`): zsrm's method, rounds of DAgger-style relabelling
-    after that by the task policies (those the rollouts were collected with, or ``teachers``'),
-    and distill.json names each policy's last round."""
+    :class:`~zsrm.policy.dagger.Dagger`, passed in: it imports this module): zsrm's method, rounds
+    of DAgger-style relabelling after that by the task policies, and distill.json names each
+    policy's last round."""
     from zsrm.vlm import load_vlm
 
     torch.set_num_threads(cfg.threads)
@@ -269,13 +269,7 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
     data = cloning_data(rollouts, vlm, [embedding_kind(cfg, name) for name in cfg.policies])
     policies = {name: train_policy(cfg, name, data, vlm, Path(out) / name, progress, fresh)
                 for name in cfg.policies}
-    rounds = {}
-    if dagger is not None:
-        from zsrm.policy.dagger import Teacher, dagger_policy, teacher_folders
-
-        tutors = [Teacher(folder, goal) for folder, goal in zip(teacher_folders(rollouts, teachers), data.goals)]
-        rounds = {name: dagger_policy(cfg, dagger, name, data, vlm, tutors, Path(out), progress, fresh)
-                  for name in cfg.policies}
+    rounds = dagger(cfg, data, vlm, rollouts, Path(out), progress, fresh) if dagger is not None else {}
     summary = {"schedule": cfg.schedule, "tower": cfg.tower, "pretrained": cfg.pretrained, "epochs": cfg.epochs,
                "vlm": cfg.vlm, "text_embedding": cfg.text_embedding, "seed": cfg.seed,
                **({"centre_text": True} if "language" in cfg.policies and centres_text(cfg, "language", data.goals) else {}),
@@ -286,7 +280,7 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
                             for name, t in policies.items()}}
     if dagger is not None:
         summary["distillation"] = "dagger"
-        summary["dagger"] = {k: v for k, v in asdict(dagger).items() if k != "envs"}
+        summary["dagger"] = dagger.settings()
         for name, records in rounds.items():
             summary["policies"][name] = {
                 "folder": f"dagger/{name}/round_{len(records)}", "final_loss": records[-1]["final_loss"],
