@@ -74,20 +74,12 @@ class Task:
                 raise GoalError(f"the {colour} is on the tabletop, with blocks, not with {self.shape}s")
             if colour not in COLOURS and colour not in CONTAINERS:
                 raise GoalError(f"unknown colour {colour!r}; known colours: {', '.join(COLOURS)}")
-        arity = RELATIONS[self.relation].arity
-        if len(self.objects) != arity:
-            raise GoalError(f"{self.relation} relates {arity} objects, got {len(self.objects)}")
-        if len(set(self.objects)) != len(self.objects):
-            raise GoalError(f"a goal must name different objects, got {', '.join(self.objects)}")
+        check_objects(self.relation, self.objects)
 
     @property
     def text(self) -> str:
         """The canonical goal sentence."""
-        names = [with_article(p) for p in self.phrases]
-        rel = RELATIONS[self.relation]
-        if rel.arity == 3:
-            return f"{names[0]} {rel.phrase} {names[1]} and {names[2]}"
-        return f"{names[0]} {rel.phrase} {names[1]}"
+        return goal_sentence(self.relation, self.phrases)
 
     @property
     def phrases(self) -> tuple[str, ...]:
@@ -104,6 +96,24 @@ class Task:
 
     def __str__(self) -> str:
         return self.text
+
+
+def check_objects(relation: str, objects: tuple[str, ...]) -> None:
+    """As many objects as the relation relates, all different (a Task's or an own scene's goal)."""
+    arity = RELATIONS[relation].arity
+    if len(objects) != arity:
+        raise GoalError(f"{relation} relates {arity} objects, got {len(objects)}")
+    if len(set(objects)) != len(objects):
+        raise GoalError(f"a goal must name different objects, got {', '.join(objects)}")
+
+
+def goal_sentence(relation: str, phrases: tuple[str, ...]) -> str:
+    """The canonical sentence of ``relation`` over noun phrases: "a red mug on top of an orange plate"."""
+    names = [with_article(p) for p in phrases]
+    rel = RELATIONS[relation]
+    if rel.arity == 3:
+        return f"{names[0]} {rel.phrase} {names[1]} and {names[2]}"
+    return f"{names[0]} {rel.phrase} {names[1]}"
 
 
 def with_article(phrase: str) -> str:

@@ -24,7 +24,7 @@ import re
 from dataclasses import dataclass
 
 from zsrm.tasks.language import (GoalError, _check_words, _Mention, _normalise, _quote, _Refusal, _relate,
-                                 with_article)
+                                 check_objects, goal_sentence)
 from zsrm.tasks.lexicon import (DETERMINERS, EACH_OTHER, LEAD_WORDS, LINK_FILLERS, NEGATIONS, POSSESSIVE_SIDES,
                                 RELATION_PATTERNS, TAIL_WORDS)
 from zsrm.tasks.relations import RELATIONS
@@ -54,11 +54,7 @@ class SceneGoal:
         for phrase in self.objects:
             if not isinstance(phrase, str) or not _PHRASE.match(phrase):
                 raise GoalError(f"object {phrase!r} is not a noun phrase of lower-case words")
-        arity = RELATIONS[self.relation].arity
-        if len(self.objects) != arity:
-            raise GoalError(f"{self.relation} relates {arity} objects, got {len(self.objects)}")
-        if len(set(self.objects)) != len(self.objects):
-            raise GoalError(f"a goal must name different objects, got {', '.join(self.objects)}")
+        check_objects(self.relation, self.objects)
 
     @property
     def phrases(self) -> tuple[str, ...]:
@@ -67,11 +63,7 @@ class SceneGoal:
     @property
     def text(self) -> str:
         """The canonical goal sentence ("a red mug on top of an orange plate")."""
-        names = [with_article(p) for p in self.objects]
-        rel = RELATIONS[self.relation]
-        if rel.arity == 3:
-            return f"{names[0]} {rel.phrase} {names[1]} and {names[2]}"
-        return f"{names[0]} {rel.phrase} {names[1]}"
+        return goal_sentence(self.relation, self.objects)
 
     def __str__(self) -> str:
         return self.text
