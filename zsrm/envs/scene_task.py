@@ -108,11 +108,12 @@ class SceneTask(gym.Wrapper):
 
     def reset(self, *, seed=None, options=None):
         obs, info = self.env.reset(seed=seed, options=options)
+        success = self.oracle_success()
         for _ in range(MAX_REDRAWS):  # the env's generator goes on from the seed: the same seed, the same start
-            if not self.oracle_success():
+            if not success:
                 break
             obs, info = self.env.reset(options=options)
-        success = self.oracle_success()
+            success = self.oracle_success()
         return self.adapter.observe(obs), self._verdict(info, int(success), success)
 
     def step(self, action):

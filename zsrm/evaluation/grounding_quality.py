@@ -221,6 +221,7 @@ def _close_pairs(data, cfg, xy, truth, present, scene_index) -> dict:
     """On the tilted camera read on the table, for the pairs that truly are "close to": the
     median centre distance in metres from the true and from the Grad-CAM points."""
     dist = {"true": [], "gradcam": []}
+    close_m = world_thresholds(data, cfg).close
     for s, scene in enumerate(data.scenes):
         rows = np.nonzero(scene_index == s)[0]
         h = data.table_homography.get(scene, {}).get("tilted")
@@ -232,7 +233,7 @@ def _close_pairs(data, cfg, xy, truth, present, scene_index) -> dict:
             for b in range(a + 1, present.shape[1]):
                 both = present[rows, a] & present[rows, b]
                 d = {k: np.linalg.norm(v[:, a] - v[:, b], axis=-1) for k, v in pts.items()}
-                close = both & (d["true"] < world_thresholds(data, cfg).close)
+                close = both & (d["true"] < close_m)
                 for k in dist:
                     dist[k].append(d[k][close])
     d = {k: np.concatenate(v) if v else np.zeros(0) for k, v in dist.items()}
@@ -240,7 +241,7 @@ def _close_pairs(data, cfg, xy, truth, present, scene_index) -> dict:
         return {"n": 0}
     return {"n": int(len(d["true"])), "median_m_true": float(np.median(d["true"])),
             "median_m_gradcam": float(np.nanmedian(d["gradcam"])),
-            "share_over_close_gradcam": float((~(d["gradcam"] < world_thresholds(data, cfg).close)).mean())}
+            "share_over_close_gradcam": float((~(d["gradcam"] < close_m)).mean())}
 
 
 def _notes(report: dict) -> list[str]:

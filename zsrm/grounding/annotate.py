@@ -228,15 +228,13 @@ def labelers(data: ExplorationData, cfg: LabelConfig) -> dict[str, SpatialLabele
     the data's objects (:attr:`ExplorationData.objects`: the colours, and the box if the data
     can hold it; only tabletop scenes ever hold it)."""
     out = {}
+    world = world_thresholds(data, cfg)
+    # An own scene: one width for all its objects (its adapter's), captions over its phrases (no shape).
+    own_width = own_object_width(data) if data.scene_adapter else None
     for scene in data.scenes:
-        table = data.table_homography.get(scene, {})
-        if data.scene_adapter:  # one width for all its objects, the adapter's; captions over its phrases
-            thresholds = pixel_thresholds(data.block_width_px[scene], world=world_thresholds(data, cfg),
-                                          table_cameras=table, object_width=own_object_width(data))
-            out[scene] = SpatialLabeler(thresholds, shape=None, colours=data.objects, table_homography=table)
-            continue
-        thresholds = pixel_thresholds(data.block_width_px[scene], SCENE_SHAPES[scene], cfg.world_thresholds(), table)
-        out[scene] = SpatialLabeler(thresholds, shape=SCENE_SHAPES[scene], colours=data.objects, table_homography=table)
+        table, shape = data.table_homography.get(scene, {}), caption_shape(scene)
+        thresholds = pixel_thresholds(data.block_width_px[scene], shape, world, table, object_width=own_width)
+        out[scene] = SpatialLabeler(thresholds, shape=shape, colours=data.objects, table_homography=table)
     return out
 
 
