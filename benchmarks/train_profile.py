@@ -237,6 +237,14 @@ def old_spatial_softmax(softmax, maps: torch.Tensor) -> torch.Tensor:
     return torch.cat([(attention @ softmax.grid).flatten(1), peak / 4.0], dim=1)
 
 
+def old_shrink_frames(images: np.ndarray, side: int) -> np.ndarray:
+    """The policy's frames as v1 shrank them (numpy's float64 block mean), the simple way."""
+    n, size = images.shape[:2]
+    k = size // side
+    return np.ascontiguousarray(images.reshape(n, side, k, side, k, 3).mean(axis=(2, 4)).round()
+                                .transpose(0, 3, 1, 2), dtype=np.uint8)
+
+
 def per_call_ms(fn, repeats: int = 40) -> float:
     for _ in range(3):
         fn()
@@ -279,6 +287,16 @@ def micro(compile_extractor: bool) -> dict:
     with torch.no_grad():
         pair("frozen VLM trunk on 16 frames: 64 px / 32 px", lambda: vlm.image_trunk(frames),
              lambda: vlm.image_trunk(small))
+    from zsrm.rl.features import shrink_frames
+    from zsrm.vlm.base import pixels_from_images
+
+    images = np.random.default_rng(1).integers(0, 256, (16, 64, 64, 3), dtype=np.uint8)
+    pair("the pixel CNN's frames, 16 frames 64 -> 32 px: numpy float64 block mean / avg_pool2d (same bytes)",
+         lambda: old_shrink_frames(images, 32), lambda: shrink_frames(images, 32))
+    cfg = vlm.config
+    pair("VLM preprocessing of a 16-frame batch: split into frames and stacked / read as one batch (same values)",
+         lambda: pixels_from_images(list(images), cfg.image_size, cfg.mean, cfg.std),
+         lambda: pixels_from_images(images, cfg.image_size, cfg.mean, cfg.std))
     if compile_extractor:
         t = time.perf_counter()
         compiled = torch.compile(extractor)

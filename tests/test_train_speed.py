@@ -146,7 +146,32 @@ def test_profile_times_the_code_levers_against_the_simple_way():
     import train_profile
 
     levers = train_profile.micro(compile_extractor=False)
-    assert len(levers) == 3 and all(v["simple_ms"] > 0 and v["fast_ms"] > 0 for v in levers.values())
+    assert len(levers) == 5 and all(v["simple_ms"] > 0 and v["fast_ms"] > 0 for v in levers.values())
+
+
+@pytest.mark.parametrize("side", [32, 16, 64])
+def test_shrunk_frames_are_the_bytes_of_the_numpy_block_mean(side):
+    import train_profile
+    from zsrm.rl.features import shrink_frames
+
+    rng = np.random.default_rng(side)
+    images = rng.integers(0, 256, (5, 64, 64, 3), dtype=np.uint8)
+    images[:2] = rng.integers(0, 3, (2, 64, 64, 3), dtype=np.uint8) * 2 + 1  # many block means end in .5
+    fast = shrink_frames(images, side)
+    assert fast.dtype == np.uint8 and fast.shape == (5, 3, side, side) and fast.flags.c_contiguous
+    np.testing.assert_array_equal(fast, train_profile.old_shrink_frames(images, side))
+
+
+def test_a_batch_of_frames_is_preprocessed_as_its_frames_one_by_one():
+    from zsrm.vlm.base import pixels_from_images
+
+    images = np.random.default_rng(0).integers(0, 256, (4, 64, 64, 3), dtype=np.uint8)
+    for size in (64, 32):
+        batch = pixels_from_images(images, size, (0.5, 0.4, 0.3), (0.2, 0.3, 0.25))
+        one_by_one = pixels_from_images(list(images), size, (0.5, 0.4, 0.3), (0.2, 0.3, 0.25))
+        assert torch.equal(batch, one_by_one)
+    with pytest.raises(ValueError, match="uint8"):
+        pixels_from_images(images.astype(np.float32), 64, (0.5,) * 3, (0.2,) * 3)
 
 
 def test_old_spatial_softmax_matches_the_fast_one():

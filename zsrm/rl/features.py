@@ -64,11 +64,7 @@ class VecImageFeatures(VecEnvWrapper):
 
     def frames(self, images: np.ndarray) -> np.ndarray:
         """(N, H, W, 3) uint8 -> (N, 3, s, s) uint8 at the pixel CNN's side ``s`` (area average)."""
-        n, size = images.shape[0], images.shape[1]
-        if size != self.pixel_size:
-            k = size // self.pixel_size
-            images = images.reshape(n, self.pixel_size, k, self.pixel_size, k, 3).mean(axis=(2, 4)).round()
-        return np.ascontiguousarray(images.transpose(0, 3, 1, 2), dtype=np.uint8)
+        return shrink_frames(images, self.pixel_size)
 
     def convert(self, images: np.ndarray) -> dict:
         """Camera frames (N, H, W, 3) uint8 -> the policy's observation (maps and CHW frames)."""
@@ -88,6 +84,17 @@ class VecImageFeatures(VecEnvWrapper):
             for j, i in enumerate(terminal):
                 infos[i]["terminal_observation"] = {k: v[j] for k, v in converted.items()}
         return self._convert(obs), rewards, dones, infos
+
+
+def shrink_frames(images: np.ndarray, side: int) -> np.ndarray:
+    """(N, H, W, 3) uint8 -> (N, 3, side, side) uint8: the mean of each k x k block, rounded
+    half to even (``side`` divides H = W). The same numbers as numpy's float64 block mean, in a
+    quarter of its time: the sum of k x k bytes over k * k is exact, or at least 1 / (2 k^2)
+    from a tie, in float32 (a test checks it against the numpy mean)."""
+    x = torch.from_numpy(np.ascontiguousarray(images)).permute(0, 3, 1, 2)
+    if x.shape[-1] != side:
+        x = nn.functional.avg_pool2d(x.float(), x.shape[-1] // side).round_().to(torch.uint8)
+    return x.contiguous().numpy()
 
 
 def check_view(size: int, camera_size: int) -> int:

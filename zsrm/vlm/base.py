@@ -151,16 +151,20 @@ def pixels_from_images(images: ImageBatch, size: int, mean, std, crop: bool = Tr
     Square images are resized; others are resized on their short side and centre-cropped
     (``crop=True``, CLIP's "shortest" mode) or squashed (``crop=False``).
     """
-    arrays = image_batch(images)
+    if isinstance(images, np.ndarray) and images.ndim == 4 and len(images):
+        _check_image(_check_dtype(images)[0], "image 0")  # one batch, one shape: no list to split and stack
+        arrays, by_shape = images, {images.shape[1:]: slice(None)}
+    else:
+        arrays = image_batch(images)
+        by_shape = {}
+        for i, a in enumerate(arrays):  # resize images of one shape together
+            by_shape.setdefault(a.shape, []).append(i)
     mean_t = torch.tensor(mean, dtype=torch.float32, device=device).view(1, 3, 1, 1)
     std_t = torch.tensor(std, dtype=torch.float32, device=device).view(1, 3, 1, 1)
     out = torch.empty(len(arrays), 3, size, size, device=device)
-    # Resize images of one shape together: the common case is one NHWC batch.
-    by_shape: dict[tuple, list[int]] = {}
-    for i, a in enumerate(arrays):
-        by_shape.setdefault(a.shape, []).append(i)
     for shape, idx in by_shape.items():
-        x = torch.from_numpy(np.stack([arrays[i] for i in idx])).to(device).permute(0, 3, 1, 2).float() / 255.0
+        x = torch.from_numpy(np.ascontiguousarray(arrays[idx]) if isinstance(idx, slice)
+                             else np.stack([arrays[i] for i in idx])).to(device).permute(0, 3, 1, 2).float() / 255.0
         h, w = shape[:2]
         if (h, w) != (size, size):
             if crop and h != w:
