@@ -266,14 +266,6 @@ def test_collect_from_the_command_line(tmp_path, capsys):
     assert sorted(k for k in ExplorationData(out).load() if k.startswith("images_")) == ["images_front", "images_tilted"]
 
 
-def test_stages_that_do_not_take_an_own_scene_yet_say_so_in_one_line(tmp_path, capsys):
-    collect(CollectConfig(scene=SPEC, images=2, shard_size=2, episode_steps=2, record_every=1), tmp_path / "own",
-            progress=False)
-    assert main(["finetune", "--data", str(tmp_path / "own"), "--out", str(tmp_path / "model"), "--quiet"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"holds data of your own scene ({SPEC}); zsrm finetune does not take" in err[0]
-
-
 def test_a_scene_from_its_xml_alone(tmp_path):
     """No env of the user's: zsrm builds one from the MJCF; positions from the bodies named."""
     from gymnasium.utils.env_checker import check_env as gym_check
@@ -416,6 +408,26 @@ def test_a_goal_the_scene_cannot_read_is_one_line_listing_its_objects(text, word
     line = _one_line(err.value)
     assert words in line
     assert line.endswith(f"{SPEC}'s objects: red cylinder, purple cylinder, orange cylinder, wooden bowl")
+
+
+def test_a_caption_over_an_own_scenes_phrases_reads_without_its_object_list():
+    """Training reads captions with no adapter at hand: the canonical sentence is enough."""
+    from zsrm.fullmodel.text import noun_phrases
+    from zsrm.tasks.negatives import caption_candidates, caption_relation_camera, complement_of
+    from zsrm.tasks.scene_goals import read_canonical
+
+    text = "an orange cylinder close to a wooden bowl"
+    assert read_canonical(text) == parse_scene_goal(text, PHRASES)
+    assert caption_candidates(text) == candidate_texts(parse_scene_goal(text, PHRASES))
+    assert caption_relation_camera("a red cylinder far from an orange cylinder") == ("far_from", "tilted")
+    assert complement_of("a red cylinder far from an orange cylinder").objects == ("red cylinder", "orange cylinder")
+    assert noun_phrases("a red cylinder on the right of a purple cylinder") == ("red cylinder", "purple cylinder")
+    with pytest.raises(GoalError, match="2 readings"):
+        read_canonical("a cup on top of a mug on top of a plate")
+    zsrms = "a yellow block on top of a red block"
+    assert caption_candidates(zsrms) == candidate_texts(zsrms) and complement_of("a red block far from a box").objects == ("red", "box")
+    with pytest.raises(GoalError, match="purple"):  # a goal a user writes stays strict
+        candidate_texts("a purple block on top of a red block")
 
 
 def test_zsrms_goals_and_the_scenes_goals_do_not_mix():
@@ -606,7 +618,7 @@ def test_train_on_the_example_scene_with_the_base_reward(tmp_path):
 
 
 @pytest.mark.parametrize("reward, words", [
-    ("zsrm", f"the zsrm reward on your own scene ({SPEC}) needs the labeler and a reward model finetuned"),
+    ("zsrm", f"the zsrm reward on your own scene ({SPEC}) reads a reward model trained on that scene's labelled"),
     ("vice", "the vice reward fits its goal classifier on zsrm's scripted episodes"),
 ])
 def test_train_refuses_a_reward_not_built_for_an_own_scene_in_one_line(reward, words, tmp_path, capsys):
@@ -690,6 +702,47 @@ def test_label_an_own_scene_captions_its_phrases_and_its_oracle_is_the_scene_tas
     assert report["meta"]["own_scene"]["adapter"] == SPEC
     located = {k.rsplit(".", 1)[-1] for k in report if k.startswith("median_px_error_by_colour.front.")}
     assert located and located <= set(PHRASES)
+
+
+def test_the_full_model_on_the_example_scene_end_to_end(tmp_path, capsys):
+    """reward data (collect + label), the student finetuned on its Grad-CAM captions, its
+    binarised reward against the scene's oracle, and PPO with it: the chain on a tiny scale."""
+    from zsrm.fullmodel.pairs import CaptionedImages
+    from zsrm.rl import TrainConfig, train
+    from zsrm.tasks.negatives import complement_of
+
+    own, vlm, student = tmp_path / "own", _own_vlm(tmp_path / "vlm"), tmp_path / "student"
+    data = collect(_tiny(), own, progress=False)
+    assert main(["label", str(own), "--vlm", str(vlm), "--quiet"]) == 0
+    pairs = CaptionedImages.from_dataset(own)
+    assert pairs.n_pairs > 0
+    for text in pairs.pair_texts():  # the adapter's phrases, with "far from" complements of close to
+        denied = complement_of(text)
+        assert (denied.objects if denied else parse_scene_goal(text, PHRASES).objects)[0] in PHRASES
+    assert main(["finetune", "--data", str(own), "--student", "--student-arch", "tiny", "--vlm", str(vlm),
+                 "--out", str(student), "--steps", "4", "--batch-size", "8", "--eval-every", "4",
+                 "--checkpoint-every", "4", "--quiet"]) == 0
+    goals = ["a red cylinder on the right of a purple cylinder", "an orange cylinder on the left of a red cylinder"]
+    out = tmp_path / "reward_eval.json"
+    assert main(["eval-reward", "--scene", SPEC, "--data", str(own), "--zsrm", str(student), "--base", str(vlm),
+                 "--tasks", *goals, "--out", str(out), "--curves", "", "--quiet"]) == 0
+    report, world = json.loads(out.read_text()), data.captions(oracle="world")
+    for goal in goals:  # every held-out frame, labelled by the scene's oracle
+        for name in ("zsrm", "base"):
+            cell = report[name][goal]
+            assert cell["frames"] == 6 and cell["positives"] == sum(goal in caps for caps in world)
+    assert report["meta"]["frames"][goals[0]]["camera"] == "front"
+    cfg = TrainConfig(goal=goals[0], scene=SPEC, reward="zsrm", reward_model=str(student), vlm=str(vlm), steps=128,
+                      eval_every=128, checkpoint_every=128, n_envs=2, n_steps=16, batch_size=16, n_epochs=1,
+                      eval_episodes=2, keypoints=4)
+    summary = train(cfg, tmp_path / "run", progress=False)
+    assert summary["env_steps"] == 128 and summary["config"]["reward_model"] == str(student)
+
+
+def test_eval_reward_on_an_own_scene_needs_its_goals_and_data_in_one_line(capsys):
+    assert main(["eval-reward", "--scene", SPEC, "--out", "/dev/null"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "give --tasks (goal sentences over its objects) and --data" in err[0]
 
 
 def test_label_refuses_a_vlm_not_taught_the_scenes_objects_in_one_line(tmp_path, capsys):

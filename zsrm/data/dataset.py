@@ -56,12 +56,6 @@ class ExplorationData:
         info = self.manifest.get("scene_adapter")
         return info.get("name") if isinstance(info, dict) else None
 
-    def require_zsrm_scenes(self, stage: str) -> None:
-        """One clear line, not a crash further on, from a stage that reads zsrm's scenes only."""
-        if self.scene_adapter:
-            raise ValueError(f"{self.folder} holds data of your own scene ({self.scene_adapter}); {stage} does not "
-                             "take an own scene yet (docs/own-scene.md, 'Not yet')")
-
     @property
     def has_box(self) -> bool:
         """Collected with ``p_box``: some tabletop scenes hold the box, whose arrays are

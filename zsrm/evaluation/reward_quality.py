@@ -113,6 +113,30 @@ def distractor_frames(task: str, scripted_episodes: int = 10, random_episodes: i
     return EvalFrames.concat(f"{task}_distractor", parts)
 
 
+def scene_data_frames(folder, goal, labels=None) -> EvalFrames:
+    """An own scene's collected frames (``zsrm collect --scene``, then ``zsrm label``) of the
+    camera its goal's relation is read on, each labelled by the scene's oracle: whether the
+    goal's sentence is among the image's true-coordinate captions, which ``zsrm label`` writes
+    for evaluation from the privileged positions along each role camera's own axes, as
+    :class:`~zsrm.envs.scene_task.SceneTask` judges goals. ``goal``: a SceneGoal."""
+    from zsrm.data.dataset import LABELS, ExplorationData
+
+    data = ExplorationData(folder)
+    if not data.scene_adapter:
+        raise ValueError(f"{folder} holds data of zsrm's scenes; the frames of zsrm's tasks come from their "
+                         "rollouts (zsrm eval-reward without --scene)")
+    camera = RELATIONS[goal.relation].camera
+    if camera not in data.cameras:
+        raise ValueError(f"{folder} has no {camera} images, which {goal.text!r} is read on (collect with that role)")
+    truth = np.array([goal.text in caps for caps in data.captions(labels or LABELS, oracle="world")])
+    parts = [data.shard(name, [f"images_{camera}", "episode", "step"]) for name in data.shards]
+    images = np.concatenate([p[f"images_{camera}"] for p in parts])
+    if len(images) != len(truth):
+        raise ValueError(f"{folder}: {len(truth)} labelled images but {len(images)} collected: label every shard first")
+    return EvalFrames(goal.text, goal.text, camera, images, truth, np.full(len(truth), "random"),
+                      np.concatenate([p["episode"] for p in parts]), np.concatenate([p["step"] for p in parts]))
+
+
 def reward_metrics(binary, raw, margin, truth) -> dict:
     out = binary_metrics(np.asarray(binary) > 0.5, truth)
     out.update(auroc=auroc(raw, truth), auroc_margin=auroc(margin, truth),

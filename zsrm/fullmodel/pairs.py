@@ -27,7 +27,8 @@ from zsrm.data.dataset import LABELS, ExplorationData
 from zsrm.grounding.labeler import relation_tuples
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.language import Task
-from zsrm.tasks.negatives import COMPLEMENTS, caption_relation_camera, candidate_texts, complement_text
+from zsrm.tasks.scene_goals import SceneGoal
+from zsrm.tasks.negatives import COMPLEMENTS, caption_candidates, caption_relation_camera, complement_text
 
 
 @lru_cache(maxsize=None)
@@ -41,14 +42,16 @@ def caption_relation(caption: str) -> str:
     return caption_relation_camera(caption)[0]
 
 
-def complement_captions(captions: Sequence[str], objects: Sequence[str], shape: str) -> list[str]:
+def complement_captions(captions: Sequence[str], objects: Sequence[str], shape: str | None) -> list[str]:
     """Complement captions of one image (see :data:`~zsrm.tasks.negatives.COMPLEMENTS`): for each
     complemented relation, every object tuple the labeler reads it for
     (:func:`~zsrm.grounding.labeler.relation_tuples`) that it did not caption: "a far from b" for
     coloured objects not found close to each other, and where ``objects`` holds the box, "a
-    outside of a box" for coloured objects not found inside of it."""
+    outside of a box" for coloured objects not found inside of it. ``shape`` None: ``objects`` are
+    an own scene's phrases."""
     have = set(captions)
-    tasks = (Task(relation, [objects[i] for i in t], shape)
+    goal = SceneGoal if shape is None else (lambda relation, objs: Task(relation, objs, shape))
+    tasks = (goal(relation, [objects[i] for i in t])
              for relation in COMPLEMENTS for t in relation_tuples(relation, objects))
     return [complement_text(t) for t in tasks if t.text not in have]
 
@@ -168,15 +171,15 @@ class CaptionedImages:
         """Every caption and every negative of every caption, each once."""
         seen: dict[str, None] = {}
         for t in dict.fromkeys(self._pair_texts):
-            seen.update(dict.fromkeys(candidate_texts(t)))
+            seen.update(dict.fromkeys(caption_candidates(t)))
         return list(seen)
 
     @classmethod
     def from_dataset(cls, folder: str | Path, labels: str | Path = LABELS) -> "CaptionedImages":
-        """A collected and labelled dataset folder: its images, the Grad-CAM captions of
-        ``labels`` and, for the complements, each scene's object list (what the labeler reads)."""
+        """A collected and labelled dataset folder (of zsrm's scenes or an own scene's): its images,
+        the Grad-CAM captions of ``labels`` and, for the complements, each scene's object list
+        (what the labeler reads: an own scene's phrases)."""
         data = ExplorationData(folder)
-        data.require_zsrm_scenes("zsrm finetune")
         captions = data.captions(labels)  # Grad-CAM captions only (oracle=None)
         images, groups, objects = {c: [] for c in data.cameras}, [], []
         for s, name in enumerate(data.shards):
@@ -187,6 +190,6 @@ class CaptionedImages:
             # Episodes are numbered within a shard: make the group ids unique across shards.
             groups.append(s * 1_000_000 + arrays["episode"].astype(np.int64))
             present = data.object_arrays(arrays)["present"]  # over data.objects: the box last, where it can be
-            objects += [(SCENE_SHAPES[data.scenes[sc]], [o for o, p in zip(data.objects, row) if p])
+            objects += [(SCENE_SHAPES.get(data.scenes[sc]), [o for o, p in zip(data.objects, row) if p])
                         for sc, row in zip(arrays["scene"], present)]
         return cls({c: np.concatenate(v) for c, v in images.items()}, captions, np.concatenate(groups), objects)

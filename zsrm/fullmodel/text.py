@@ -24,8 +24,8 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from zsrm.tasks.language import GoalError, parse_goal
-from zsrm.tasks.negatives import complement_of
+from zsrm.tasks.language import GoalError
+from zsrm.tasks.negatives import complement_of, read_caption
 from zsrm.vlm.base import VisionLanguageModel
 from zsrm.vlm.factory import load_vlm
 
@@ -60,13 +60,13 @@ class TextWhitener(nn.Module):
 
 @lru_cache(maxsize=None)
 def noun_phrases(text: str) -> tuple[str, ...]:
-    """The object phrases of a caption or goal, in order ("red block", "blue block"); () if the
-    text is not one zsrm reads."""
+    """The object phrases of a caption or goal, in order ("red block", "blue block"; an own
+    scene's "red cylinder", "wooden bowl"); () if the text is not one zsrm reads."""
     denied = complement_of(text)
     if denied is not None:
         return denied.phrases
     try:
-        return parse_goal(text).phrases
+        return read_caption(text).phrases
     except GoalError:
         return ()
 

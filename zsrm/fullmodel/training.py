@@ -38,7 +38,7 @@ from zsrm.data.dataset import LABELS
 from zsrm.fullmodel.adapted import AdaptedVLM
 from zsrm.fullmodel.pairs import CaptionedImages, caption_relation
 from zsrm.fullmodel.student import StudentConfig, StudentRewardNet
-from zsrm.tasks.negatives import candidate_texts
+from zsrm.tasks.negatives import caption_candidates
 from zsrm.vlm.base import VisionLanguageModel
 from zsrm.vlm.factory import DEFAULT_VLM, load_vlm
 from zsrm.vlm.losses import multi_positive_contrastive_loss
@@ -154,7 +154,7 @@ def reward_logits(image_emb: torch.Tensor, text_emb: torch.Tensor, captions: Seq
     target = torch.empty(len(captions), dtype=torch.long, device=image_emb.device)
     for i, cap in enumerate(captions):
         true_here = holds[i] if holds is not None else set()
-        allowed[i, [vocab_index[t] for t in candidate_texts(cap) if t == cap or t not in true_here]] = True
+        allowed[i, [vocab_index[t] for t in caption_candidates(cap) if t == cap or t not in true_here]] = True
         target[i] = vocab_index[cap]
     # Mask after scaling: -inf times a learnable scale would give NaN gradients.
     logits = (scale * (image_emb @ text_emb.T)).masked_fill(~allowed, float("-inf"))
@@ -168,7 +168,7 @@ def batch_loss(model: VisionLanguageModel, images: np.ndarray, captions: list[st
     needed = dict.fromkeys(captions)
     if hard_negative_weight > 0:
         for cap in list(needed):
-            needed.update(dict.fromkeys(candidate_texts(cap)))
+            needed.update(dict.fromkeys(caption_candidates(cap)))
     vocab = list(needed)
     index = {t: i for i, t in enumerate(vocab)}
     text_emb = model.encode_texts(vocab, normalize=True)
@@ -204,7 +204,7 @@ def evaluate_pairs(model: VisionLanguageModel, data: CaptionedImages, max_pairs:
             loss, _ = batch_loss(model, images, captions, None, 0.0)
             loss_sum, loss_n = loss_sum + float(loss) * len(part), loss_n + len(part)
         image_emb = model.encode_images(images, normalize=True)
-        vocab = list(dict.fromkeys(t for c in captions for t in candidate_texts(c)))
+        vocab = list(dict.fromkeys(t for c in captions for t in caption_candidates(c)))
         index = {t: i for i, t in enumerate(vocab)}
         logits, target = reward_logits(image_emb, model.encode_texts(vocab, normalize=True), captions, index, holds)
         correct += (logits.argmax(dim=1) == target).tolist()

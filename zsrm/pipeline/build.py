@@ -153,15 +153,20 @@ class RewardData:
     close: float = WORLD_THRESHOLDS.close  # close to: largest centre distance (m), Table 1's
     locate: Literal["argmax", "peak_centroid", "fine"] = "fine"  # object positions: see zsrm label --locate
     vlm: str = DEFAULT_VLM  # the VLM whose Grad-CAM labels the frames: scene, a saved folder, open_clip:MODEL[:TAG]
+    scene: str = ""  # your own scene (module:Class or a registered id; docs/own-scene.md): its exploration, labelled as zsrm label does (--vlm a VLM that knows its objects)
     quiet: bool = False  # no progress bars
 
     def collect_config(self) -> CollectConfig:
+        if self.scene:  # the env lays its objects out itself: zsrm's layouts (p_hold, p_box) do not apply
+            return CollectConfig(images=self.images, shard_size=self.shard_size, seed=self.seed, scene=self.scene)
         return CollectConfig(images=self.images, shard_size=self.shard_size, seed=self.seed,
                              scenes=("tabletop", "pushing"), p_hold=self.p_hold, p_box=self.p_box)
 
     def label_config(self) -> LabelConfig:
         from dataclasses import asdict
 
+        if self.scene:  # thresholds scaled to the adapter's object width, as zsrm label does
+            return LabelConfig(vlm=self.vlm)
         return LabelConfig(cell_centres="grid", vlm=self.vlm, locate=self.locate,
                            thresholds={**asdict(WORLD_THRESHOLDS), "eps_y": self.eps_y, "close": self.close})
 

@@ -32,6 +32,7 @@ from zsrm.rewards.interface import RewardModel, check_goal, check_images
 from zsrm.tasks.catalogue import as_task
 from zsrm.tasks.negatives import candidate_texts
 from zsrm.tasks.relations import RELATIONS
+from zsrm.tasks.scene_goals import parse_scene_goal
 from zsrm.vlm.text_cache import TextEmbeddingCache
 
 OUTPUTS = ("binary", "raw", "margin")
@@ -67,12 +68,14 @@ class ZSRMReward(RewardModel):
                 negative's).
     camera:     the camera to read; None (default) reads the one the goal's relation needs.
     batch_size: frames per forward pass.
+    objects:    an own scene's noun phrases (its adapter's ``objects``): goals name them
+                (:func:`~zsrm.tasks.scene_goals.parse_scene_goal`); None: zsrm's objects.
     """
 
     name = "zsrm"
 
     def __init__(self, model, output: str = "binary", camera: str | None = None, batch_size: int = 256,
-                 cache_texts: bool = True, name: str | None = None):
+                 cache_texts: bool = True, name: str | None = None, objects: Sequence[str] | None = None):
         self.output = _check_output(output)
         if batch_size < 1:
             raise ValueError(f"batch_size must be >= 1, got {batch_size}")
@@ -86,6 +89,7 @@ class ZSRMReward(RewardModel):
         self.text_cache = TextEmbeddingCache(lambda texts: model.encode_texts(texts, normalize=True),
                                              enabled=cache_texts)
         self._candidates: dict[str, list[str]] = {}
+        self.objects = tuple(objects) if objects else None
 
     @classmethod
     def from_folder(cls, folder: str | Path, **kwargs) -> "ZSRMReward":
@@ -99,11 +103,15 @@ class ZSRMReward(RewardModel):
         """The goal's canonical text first, then its negatives (GoalError for non-spatial goals)."""
         goal = check_goal(goal)
         if goal not in self._candidates:
-            self._candidates[goal] = candidate_texts(as_task(goal))
+            self._candidates[goal] = candidate_texts(self.read_goal(goal))
         return self._candidates[goal]
 
+    def read_goal(self, goal: str):
+        """The goal's Task, or with ``objects`` its SceneGoal over them (GoalError, one line)."""
+        return parse_scene_goal(goal, self.objects) if self.objects else as_task(goal)
+
     def goal_camera(self, goal: str) -> str:
-        return self.fixed_camera or RELATIONS[as_task(check_goal(goal)).relation].camera
+        return self.fixed_camera or RELATIONS[self.read_goal(check_goal(goal)).relation].camera
 
     def prepare(self, goal: str) -> None:
         """Embed the goal and its negatives once, and pick the camera the goal needs."""

@@ -195,10 +195,11 @@ def check_scene_run(cfg: TrainConfig) -> None:
     nothing zsrm builds only for its own scenes, none of the tabletop's starts; one line each."""
     if not isinstance(cfg.scene, str) or not cfg.scene:
         raise ValueError(f"scene must be module:Class or a registered id, got {cfg.scene!r}")
-    if cfg.reward == "zsrm":
-        raise ValueError(f"the zsrm reward on your own scene ({cfg.scene}) needs the labeler and a reward model "
-                         "finetuned on that scene's data, which zsrm label, reward-data and finetune do not build "
-                         "yet (docs/own-scene.md); train with the oracle, base, curiosity or random reward")
+    if cfg.reward == "zsrm" and cfg.reward_model.split("@")[0] == "student":
+        raise ValueError(f"the zsrm reward on your own scene ({cfg.scene}) reads a reward model trained on that "
+                         "scene's labelled data: give its folder with --reward-model (zsrm reward-data --scene, then "
+                         "zsrm finetune --student; docs/own-scene.md); the shipped student knows zsrm's blocks and "
+                         "pucks only")
     if cfg.reward == "vice":
         raise ValueError(f"the vice reward fits its goal classifier on zsrm's scripted episodes, which your own "
                          f"scene ({cfg.scene}) has not; train with the oracle, base, curiosity or random reward")

@@ -89,9 +89,11 @@ def make_reward(cfg: TrainConfig, folder=None):
     if cfg.reward == "oracle":
         return OracleReward()
     if cfg.reward == "zsrm":
+        from zsrm.envs.adapter import load_adapter
         from zsrm.fullmodel import load_reward_backbone
 
-        return ZSRMReward(load_reward_backbone(cfg.reward_model), output=cfg.zsrm_output)
+        objects = load_adapter(cfg.scene).objects if cfg.scene else None
+        return ZSRMReward(load_reward_backbone(cfg.reward_model), output=cfg.zsrm_output, objects=objects)
     if cfg.reward == "base":
         from zsrm.vlm import load_vlm
 

@@ -24,9 +24,9 @@ import re
 from dataclasses import replace
 
 from zsrm.tasks.catalogue import as_task
-from zsrm.tasks.language import Task, parse_goal, with_article
+from zsrm.tasks.language import GoalError, Task, parse_goal, with_article
 from zsrm.tasks.relations import RELATIONS
-from zsrm.tasks.scene_goals import SceneGoal
+from zsrm.tasks.scene_goals import SceneGoal, read_canonical
 
 # Relations whose predicate does not change when the two objects swap (Table 1: both read a
 # centre distance). Checked against the predicates themselves in the tests.
@@ -48,9 +48,9 @@ IMPLIED_BY = {"in_between": frozenset({"left_of", "right_of"}), "inside_of": fro
 # tilted camera, and which of them wins on a frame with the block beside the box is chance.
 COMPLEMENTS = {"close_to": ("far_from", "far from"), "inside_of": ("outside_of", "outside of")}
 COMPLEMENT_CAMERA = {name: RELATIONS[rel].camera for rel, (name, _) in COMPLEMENTS.items()}
-# An object phrase: "red block", or the box (one word).
-_PHRASE = r"(\w+(?: \w+)?)"
-_COMPLEMENT_RE = {name: re.compile(rf"^a {_PHRASE} {words} a {_PHRASE}$") for name, words in COMPLEMENTS.values()}
+# An object phrase: "red block", the box (one word), or an own scene's ("orange cylinder").
+_PHRASE = r"([a-z]+(?: [a-z]+)*)"
+_COMPLEMENT_RE = {name: re.compile(rf"^an? {_PHRASE} {words} an? {_PHRASE}$") for name, words in COMPLEMENTS.values()}
 
 
 def complement_text(task: Task) -> str | None:
@@ -62,12 +62,29 @@ def complement_text(task: Task) -> str | None:
 
 
 def caption_relation_camera(caption: str) -> tuple[str, str]:
-    """(relation name, camera it is read on) of a caption: a Table 1 sentence or a complement."""
+    """(relation name, camera it is read on) of a caption: a Table 1 sentence or a complement,
+    over zsrm's objects or an own scene's (:func:`read_caption`)."""
     for name, pattern in _COMPLEMENT_RE.items():
         if pattern.match(caption):
             return name, COMPLEMENT_CAMERA[name]
-    relation = parse_goal(caption).relation
+    relation = read_caption(caption).relation
     return relation, RELATIONS[relation].camera
+
+
+def read_caption(caption: str) -> "Task | SceneGoal":
+    """A caption as the labeler writes it: a Task where zsrm's grammar reads it, else the
+    SceneGoal of an own scene's canonical sentence (whose phrases zsrm's grammar does not know).
+    Goals a user writes are read strictly (:func:`~zsrm.tasks.catalogue.as_task`, or
+    :func:`~zsrm.tasks.scene_goals.parse_scene_goal` with the scene's phrases): an unknown
+    colour there is an error, not an own scene's object."""
+    try:
+        return parse_goal(caption)
+    except GoalError:
+        try:
+            return read_canonical(caption)
+        except GoalError:
+            pass
+        raise
 
 
 def _goal(task: "str | Task | SceneGoal") -> "Task | SceneGoal":
@@ -120,13 +137,20 @@ def negative_texts(task: str | Task) -> list[str]:
     return [t.text for t in negative_tasks(task)] + ([complement] if complement else [])
 
 
-def complement_of(caption: str) -> Task | None:
-    """For a complement caption ("a red block far from a blue block") the task it denies."""
+def complement_of(caption: str) -> "Task | SceneGoal | None":
+    """For a complement caption ("a red block far from a blue block") the task it denies; over
+    an own scene's phrases ("a red cylinder far from an orange cylinder") its SceneGoal."""
     for relation, (name, _) in COMPLEMENTS.items():
         m = _COMPLEMENT_RE[name].match(caption)
         if m:
             (a, *shape_a), (b, *shape_b) = (p.split() for p in m.groups())
-            return Task(relation, (a, b), (shape_a or shape_b or ["block"])[0])
+            try:
+                denied = Task(relation, (a, b), (shape_a or shape_b or ["block"])[0])
+            except GoalError:
+                denied = None
+            if denied is None or complement_text(denied) != caption:
+                denied = SceneGoal(relation, m.groups())
+            return denied if complement_text(denied) == caption else None
     return None
 
 
@@ -142,3 +166,12 @@ def candidate_texts(task: str | Task) -> list[str]:
             return [complement_text(denied), denied.text]
     task = _goal(task)
     return [task.text] + negative_texts(task)
+
+
+def caption_candidates(caption: str) -> list[str]:
+    """:func:`candidate_texts` of a labeler's caption, over zsrm's objects or an own scene's
+    (:func:`read_caption`): what training ranks each caption against."""
+    denied = complement_of(caption)
+    if denied is not None:
+        return [complement_text(denied), denied.text]
+    return candidate_texts(read_caption(caption))

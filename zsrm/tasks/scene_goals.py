@@ -119,6 +119,32 @@ def _read(tokens: list[str], phrases: tuple[str, ...]) -> SceneGoal:
     return SceneGoal(relation, tuple(objects))
 
 
+def read_canonical(text: str) -> SceneGoal:
+    """The SceneGoal of a canonical sentence (:attr:`SceneGoal.text`: how the labeler writes an
+    own scene's captions) without the scene's object list: the one reading whose text gives
+    ``text`` back. GoalError when none does, or more than one.
+
+    >>> read_canonical("an orange cylinder close to a wooden bowl").objects
+    ('orange cylinder', 'wooden bowl')
+    """
+    words, tokens, found = r"[a-z]+(?: [a-z]+)*", text.split(), []
+    for name, rel in RELATIONS.items():
+        rest = rf"{rel.phrase} an? ({words})" + (rf" and an? ({words})" if rel.arity == 3 else "")
+        for k in range(2, len(tokens)):  # every split after the first phrase: a phrase may hold a relation's words
+            first, others = re.fullmatch(rf"an? ({words})", " ".join(tokens[:k])), re.fullmatch(rest, " ".join(tokens[k:]))
+            if first and others:
+                try:
+                    goal = SceneGoal(name, (first.group(1), *others.groups()))
+                except GoalError:
+                    continue
+                if goal.text == text and goal not in found:
+                    found.append(goal)
+    if len(found) != 1:
+        raise GoalError(f"{text!r} has {len(found) or 'no'} reading{'s' * (len(found) != 1)} as a canonical goal sentence "
+                        "(\"a red mug on top of a blue plate\")")
+    return found[0]
+
+
 def parse_scene_goal(text: str, phrases, scene: str = "this scene") -> SceneGoal:
     """Read a goal sentence over a scene whose objects are ``phrases`` (an adapter's objects).
 
