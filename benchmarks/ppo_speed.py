@@ -7,7 +7,10 @@ final evaluation and the policy's save. Beside each, the scenes alone: the same 
 stepped with random actions (no reward, no policy). One process, one torch thread, all in one
 run. Prints and writes (``--out``):
 
-* ``env_fraction``: the default's train-loop env steps/s over its scenes' own;
+* ``env_fraction``: the default's train-loop env steps/s (as ``zsrm train`` runs it alone: its
+  scenes stepped by :func:`~zsrm.rl.ppo.auto_env_workers` processes) over its scenes' own in
+  one process; ``meta.env_fraction_one_worker`` the same with one env worker, as a sweep's
+  trial runs;
 * ``speedup``: the default's train-loop env steps/s over the baseline's (``--baseline``, v1: the
   configuration of the results committed before 2026-12-04).
 
@@ -44,13 +47,13 @@ def warm_up(cfg) -> None:
     load_reward_backbone(cfg.reward_model)
 
 
-def train_steps_per_s(cfg) -> tuple[float, int]:
+def train_steps_per_s(cfg, env_workers: int = 1) -> tuple[float, int]:
     """Env steps/s of one whole ``zsrm train`` run of ``cfg`` (and its env steps)."""
     from zsrm.rl.ppo import train
 
     with tempfile.TemporaryDirectory() as out:
         t = time.perf_counter()
-        summary = train(cfg, out, progress=False)
+        summary = train(cfg, out, progress=False, env_workers=env_workers)
         wall = time.perf_counter() - t
     return summary["env_steps"] / wall, summary["env_steps"]
 
@@ -82,17 +85,24 @@ def main(argv=None):
     parser.add_argument("--out", default=None)
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
+    from zsrm.rl.ppo import auto_env_workers
+
     runs = {}
     warm_up(preset(args.config, goal=args.goal, reward="zsrm"))
-    for name in (args.config, args.baseline):
-        cfg = preset(name, goal=args.goal, reward="zsrm", steps=args.steps)
-        train_speed, env_steps = train_steps_per_s(cfg)
+    # the default as zsrm train runs it alone (its env workers), as a sweep's trial runs it (one
+    # process), and the baseline as its sweeps ran (one process)
+    new_cfg = preset(args.config, goal=args.goal, reward="zsrm", steps=args.steps)
+    one_worker = f"{args.config}, 1 env worker"
+    plan = [(args.config, new_cfg, auto_env_workers(new_cfg)), (one_worker, new_cfg, 1),
+            (args.baseline, preset(args.baseline, goal=args.goal, reward="zsrm", steps=args.steps), 1)]
+    for name, cfg, workers in plan:
+        train_speed, env_steps = train_steps_per_s(cfg, workers)
         env_only = env_steps_per_s(cfg, 16_384)
         runs[name] = {"train_steps_per_s": train_speed, "env_only_steps_per_s": env_only,
-                      "env_fraction": train_speed / env_only, "env_steps": env_steps,
+                      "env_fraction": train_speed / env_only, "env_steps": env_steps, "env_workers": workers,
                       "train_config": cfg.to_dict()}
-        print(f"{name}: zsrm train {train_speed:.0f} env steps/s, scenes alone {env_only:.0f} "
-              f"(fraction {train_speed / env_only:.2f})", flush=True)
+        print(f"{name}: zsrm train {train_speed:.0f} env steps/s with {workers} env worker(s), scenes alone in one "
+              f"process {env_only:.0f} (fraction {train_speed / env_only:.2f})", flush=True)
     new, old = runs[args.config], runs[args.baseline]
     result = {
         "env_fraction": new["env_fraction"],
@@ -102,7 +112,12 @@ def main(argv=None):
         "meta": {"goal": args.goal, "reward": "zsrm (the shipped student)", "config": args.config,
                  "baseline": args.baseline, "steps_per_run": args.steps,
                  "timed": "the whole zsrm train run: rollouts, reward, PPO updates, inverse-dynamics loss, evaluations "
-                          "and checkpoints every 20k env steps, final 30-episode evaluation, saving the policy",
+                          "and checkpoints every 20k env steps, final 30-episode evaluation, saving the policy; the process's "
+                          "one-time imports and model loads paid before the first timed run (warm_up); the default "
+                          "with zsrm train's env workers (auto_env_workers: on 2+ cores, 2 processes step the scenes "
+                          "of a lone run while the learner keeps one torch thread) and with one, as a sweep's trial "
+                          "runs; the scenes alone always in one process",
+                 "env_fraction_one_worker": runs[one_worker]["env_fraction"],
                  "torch_threads": 1, "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU",
                  "command": "python benchmarks/ppo_speed.py"
                             + (f" --steps {args.steps}" if args.steps != 60_000 else "")

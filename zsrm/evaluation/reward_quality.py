@@ -114,10 +114,11 @@ def distractor_frames(task: str, scripted_episodes: int = 10, random_episodes: i
 
 
 def scene_data_frames(folder, goal, labels=None) -> EvalFrames:
-    """An own scene's collected frames (``zsrm collect --scene``, then ``zsrm label``) of the
-    camera its goal's relation is read on, each labelled by the scene's oracle: whether the
-    goal's sentence is among the image's true-coordinate captions, which ``zsrm label`` writes
-    for evaluation from the privileged positions along each role camera's own axes, as
+    """An own scene's collected frames (``zsrm collect --scene``, then ``zsrm label``) that hold
+    the goal's objects (the goal's scene, as training sees it), of the camera its relation is
+    read on, each labelled by the scene's oracle: whether the goal's sentence is among the
+    image's true-coordinate captions, which ``zsrm label`` writes for evaluation from the
+    privileged positions along each role camera's own axes, as
     :class:`~zsrm.envs.scene_task.SceneTask` judges goals. ``goal``: a SceneGoal."""
     from zsrm.data.dataset import LABELS, ExplorationData
 
@@ -129,12 +130,16 @@ def scene_data_frames(folder, goal, labels=None) -> EvalFrames:
     if camera not in data.cameras:
         raise ValueError(f"{folder} has no {camera} images, which {goal.text!r} is read on (collect with that role)")
     truth = np.array([goal.text in caps for caps in data.captions(labels or LABELS, oracle="world")])
-    parts = [data.shard(name, [f"images_{camera}", "episode", "step"]) for name in data.shards]
+    parts = [data.shard(name, [f"images_{camera}", "episode", "step", "present"]) for name in data.shards]
     images = np.concatenate([p[f"images_{camera}"] for p in parts])
     if len(images) != len(truth):
         raise ValueError(f"{folder}: {len(truth)} labelled images but {len(images)} collected: label every shard first")
-    return EvalFrames(goal.text, goal.text, camera, images, truth, np.full(len(truth), "random"),
-                      np.concatenate([p["episode"] for p in parts]), np.concatenate([p["step"] for p in parts]))
+    present = np.concatenate([p["present"] for p in parts])[:, [data.objects.index(o) for o in goal.objects]]
+    keep = present.all(axis=1)
+    if not keep.any():
+        raise ValueError(f"no image of {folder} holds {', '.join(goal.objects)}: collect scenes with them")
+    return EvalFrames(goal.text, goal.text, camera, images[keep], truth[keep], np.full(int(keep.sum()), "random"),
+                      np.concatenate([p["episode"] for p in parts])[keep], np.concatenate([p["step"] for p in parts])[keep])
 
 
 def reward_metrics(binary, raw, margin, truth) -> dict:

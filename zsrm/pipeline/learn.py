@@ -35,14 +35,16 @@ class Train(TrainConfig):
     config: Literal["cpu", "paper", "v1"] = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v1 (before 2026-12-04)
     fresh: bool = False  # start over instead of resuming the run folder's checkpoint
     device: str = "cpu"  # where the VLM trunk and PPO run: cpu, cuda, cuda:N or auto (not part of the run's config)
+    env_workers: int = 0  # processes that step the scenes (0: 2 with 8+ envs and 2+ cores, else 1; the same numbers either way); give 1 when runs share the cores
 
     def run(self) -> int:
-        from zsrm.rl.ppo import train
+        from zsrm.rl.ppo import auto_env_workers, train
 
         cfg = with_preset(self, self.config)
         out = Path(self.out or f"runs/rl/{cfg.goal.replace(' ', '_')}-{cfg.reward}-{cfg.seed}")
         check_writable(out, folder=True)
-        summary = train(cfg, out, fresh=self.fresh, device=self.device)
+        summary = train(cfg, out, fresh=self.fresh, device=self.device,
+                        env_workers=self.env_workers or auto_env_workers(cfg))
         print(f"{cfg.goal} with the {cfg.reward} reward, {summary['env_steps']} env steps: oracle episode reward "
               f"{summary['final_mean']:.1f} +- {summary['final_se']:.1f}, success {summary['final_success_rate']:.2f} "
               f"over {summary['final_episodes']} episodes")

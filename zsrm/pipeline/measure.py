@@ -355,6 +355,7 @@ class EvalReward:
                        for t, f in frames.items()},
             "label": "the scene's oracle: the goal's sentence among the image's true-coordinate captions (zsrm label's "
                      "labels/oracle: the privileged positions along the role camera's axes, as SceneTask judges)",
+            "frames_kept": "the held-out images that hold the goal's objects (the goal's scene, as training sees it)",
             "binary": "1 when the goal text beats every negative on the camera the relation is read on; the base "
                       "VLM binarised by the same rule",
             "machine": platform.platform(),

@@ -11,7 +11,7 @@ oracle in ``info``), so that the user's env needs no change."""
 from __future__ import annotations
 
 import gymnasium as gym
-from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 import zsrm.envs  # noqa: F401  (registers the scenes)
 from zsrm.rl.config import TrainConfig
@@ -22,12 +22,13 @@ EPISODE_STEPS = 100
 
 
 def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
-             distractors: tuple[str, ...] = ()) -> DummyVecEnv:
-    """``n_envs`` scenes of the goal in one process, seeded ``seed, seed + 1, ...``; with
+             distractors: tuple[str, ...] = (), workers: int = 1) -> VecEnv:
+    """``n_envs`` scenes of the goal, seeded ``seed, seed + 1, ...``, in this process or split over
+    ``workers`` processes (:class:`~zsrm.rl.workers.WorkerVecEnv`: the same numbers); with
     ``distractors``, colours the goal does not name are in the scene too (at the back of the
     table; with ``cfg.choice``, the one distractor in line, :func:`choice_colour`'s by default)."""
     if cfg.scene:
-        return make_scene_vec(cfg, n_envs, seed, spread, distractors)
+        return make_scene_vec(cfg, n_envs, seed, spread, distractors, workers)
     entry = task_entry(cfg.goal)
     kwargs = dict(task=entry.goal, cameras=(goal_camera(cfg.goal),), image_size=cfg.image_size,
                   action_repeat=cfg.action_repeat)
@@ -47,14 +48,23 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
             raise ValueError(f"start {cfg.start!r} is for the tabletop's blocks; {cfg.goal!r} is not a tabletop task")
         kwargs["start"] = cfg.start
     decisions = EPISODE_STEPS // cfg.action_repeat
-    venv = DummyVecEnv([lambda: gym.make(entry.env_id, max_episode_steps=decisions, **kwargs)
-                        for _ in range(n_envs)])
+    return vec_of([lambda: gym.make(entry.env_id, max_episode_steps=decisions, **kwargs)] * n_envs, seed, workers)
+
+
+def vec_of(env_fns: list, seed: int, workers: int = 1) -> VecEnv:
+    """A DummyVecEnv of ``env_fns`` (a WorkerVecEnv with ``workers`` > 1), seeded from ``seed``."""
+    if workers > 1:
+        from zsrm.rl.workers import WorkerVecEnv
+
+        venv = WorkerVecEnv(env_fns, workers)
+    else:
+        venv = DummyVecEnv(env_fns)
     venv.seed(seed)
     return venv
 
 
 def make_scene_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
-                   distractors: tuple[str, ...] = ()) -> DummyVecEnv:
+                   distractors: tuple[str, ...] = (), workers: int = 1) -> VecEnv:
     """:func:`make_vec` on a user's own scene: its adapter's env observing the goal's role camera,
     all its objects, as its own reset lays them out."""
     from zsrm.envs.adapter import check_env, load_adapter
@@ -73,9 +83,7 @@ def make_scene_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen
         return gym.wrappers.TimeLimit(SceneTask(env, adapter, goal, cfg.action_repeat),
                                       max_episode_steps=EPISODE_STEPS // cfg.action_repeat)
 
-    venv = DummyVecEnv([make for _ in range(n_envs)])
-    venv.seed(seed)
-    return venv
+    return vec_of([make] * n_envs, seed, workers)
 
 
 def make_reward(cfg: TrainConfig, folder=None):

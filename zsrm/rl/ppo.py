@@ -16,6 +16,7 @@ Only images reach the policy and the reward model; the oracle (true state) is re
 from __future__ import annotations
 
 import csv
+import os
 import time
 from pathlib import Path
 
@@ -147,12 +148,16 @@ def write_eval_csv(path: Path, rows: list[dict]) -> None:
 
 
 def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool = True, on_eval=None,
-          device: str = "cpu") -> dict:
+          device: str = "cpu", env_workers: int = 1) -> dict:
     """Train (or resume) one PPO run; returns the summary written to ``out/summary.json``.
 
     ``on_eval(row)`` is called after each evaluation (the sweep reports it to Ray Tune).
     ``device`` ('cpu', 'cuda', 'auto') runs the VLM trunk and PPO's networks there; it is not
-    part of the run's config, so a run started on a GPU resumes on a CPU and the other way."""
+    part of the run's config, so a run started on a GPU resumes on a CPU and the other way.
+    ``env_workers``: processes that step the training envs (``zsrm train``'s default is
+    :func:`auto_env_workers`; more than 1 starts processes by spawn, so a script that calls this
+    needs ``if __name__ == "__main__":``); not part of the config either, as the numbers are
+    the same (a sweep runs one trial per core with 1)."""
     from stable_baselines3.common.logger import configure
     from tqdm import tqdm
 
@@ -173,7 +178,7 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     state = None if fresh else load_checkpoint(out / "checkpoint", cfg)
     if state is not None:
         done_steps, rows = state["env_steps"], state["rows"]
-    venv, extra_callbacks, extra_modules = rewarded_env(cfg, out, done_steps)
+    venv, extra_callbacks, extra_modules = rewarded_env(cfg, out, done_steps, int(env_workers))
     venv = policy_view(venv, vlm, cfg)
     model = build_ppo(cfg, venv, device)
     aux = None
@@ -230,10 +235,21 @@ def resolve_device(device: str) -> str:
     return device
 
 
-def rewarded_env(cfg: TrainConfig, out: Path, done_steps: int):
-    """The training envs with the reward ``cfg.reward`` names, the callbacks it needs while PPO
-    trains and the modules a checkpoint must keep for it (curiosity's ICM)."""
-    venv = make_vec(cfg, cfg.n_envs, cfg.seed * 10_000 + done_steps)
+def auto_env_workers(cfg: TrainConfig) -> int:
+    """Two processes step the scenes of a run of 8 or more envs on a machine with two cores or
+    more for it (the learner keeps its one torch thread on the first), else one."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    return 2 if cores >= 2 and cfg.n_envs >= 8 else 1
+
+
+def rewarded_env(cfg: TrainConfig, out: Path, done_steps: int, workers: int = 1):
+    """The training envs (stepped by ``workers`` processes) with the reward ``cfg.reward`` names,
+    the callbacks it needs while PPO trains and the modules a checkpoint must keep for it
+    (curiosity's ICM)."""
+    venv = make_vec(cfg, cfg.n_envs, cfg.seed * 10_000 + done_steps, workers=workers)
     if cfg.reward == "curiosity":
         curiosity = VecCuriosity(venv, goal_camera(cfg.goal, cfg.scene), seed=cfg.seed)
         return curiosity, [ICMUpdate(curiosity)], {"icm.safetensors": curiosity.icm}

@@ -76,7 +76,14 @@ class RunState:
         for layer in vec_chain(model.get_env()):
             if hasattr(layer, "resume_state"):
                 self.parts.setdefault(type(layer).__name__, layer)
-        self.envs = [layer for layer in vec_chain(model.get_env()) if hasattr(layer, "envs")][-1].envs
+        # the scenes: a DummyVecEnv's envs, or a WorkerVecEnv's, whose states its workers read and set
+        self.scenes = [layer for layer in vec_chain(model.get_env())
+                       if hasattr(layer, "envs") or hasattr(layer, "env_states")][-1]
+
+    def env_states(self) -> list[tuple[dict, dict]]:
+        if hasattr(self.scenes, "env_states"):
+            return self.scenes.env_states()
+        return [env_state(env) for env in self.scenes.envs]
 
     def ready(self) -> bool:
         """Has the run a state to save (it has stepped its envs)?"""
@@ -100,8 +107,7 @@ class RunState:
                 arrays[f"rng.cuda.{i}"] = state
         for key, value in model._last_obs.items():
             arrays[f"ppo.last_obs.{key}"] = _tensor(value)
-        for i, env in enumerate(self.envs):
-            env_info, env_arrays = env_state(env)
+        for i, (env_info, env_arrays) in enumerate(self.env_states()):
             info["envs"].append(env_info)
             arrays.update({f"env{i}.{k}": _tensor(v) for k, v in env_arrays.items()})
         for name, part in self.parts.items():
@@ -131,14 +137,18 @@ class RunState:
     def _restore(self, saved: dict) -> None:
         info, arrays, folder = saved["info"], saved["arrays"], saved["folder"]
         model = self.model
-        if len(info["envs"]) != len(self.envs):
-            raise ZsrmFileError(f"{folder}: a state of {len(info['envs'])} training envs, this run has {len(self.envs)}")
+        if len(info["envs"]) != self.scenes.num_envs:
+            raise ZsrmFileError(f"{folder}: a state of {len(info['envs'])} training envs, this run has "
+                                f"{self.scenes.num_envs}")
         if set(info["parts"]) != set(self.parts):
             raise ZsrmFileError(f"{folder}: a state of the parts {sorted(info['parts'])}, this run has {sorted(self.parts)}")
-        for i, env in enumerate(self.envs):
-            prefix = f"env{i}."
-            set_env_state(env, info["envs"][i], {k[len(prefix):]: v.numpy() for k, v in arrays.items()
-                                                 if k.startswith(prefix)})
+        states = [(info["envs"][i], {k[len(f"env{i}."):]: v.numpy() for k, v in arrays.items()
+                                     if k.startswith(f"env{i}.")}) for i in range(self.scenes.num_envs)]
+        if hasattr(self.scenes, "set_env_states"):
+            self.scenes.set_env_states(states)
+        else:
+            for env, (env_info, env_arrays) in zip(self.scenes.envs, states):
+                set_env_state(env, env_info, env_arrays)
         model._last_obs = {k[len("ppo.last_obs."):]: v.numpy() for k, v in arrays.items() if k.startswith("ppo.last_obs.")}
         model._last_episode_starts = arrays["ppo.episode_starts"].numpy()
         model.num_timesteps = info["num_timesteps"]

@@ -91,7 +91,7 @@ def run_trial(trial: dict) -> dict:
         os.chdir(trial["cwd"])
     cfg = TrainConfig.from_dict(trial["config"])
     record_attempt(Path(trial["root"]) / trial["name"])
-    summary = train(cfg, Path(trial["root"]) / trial["name"], progress=False,
+    summary = train(cfg, Path(trial["root"]) / trial["name"], progress=False, env_workers=1,  # one core per trial
                     on_eval=lambda row: tune.report({**row, "final": 0}))
     result = {"env_steps": summary["env_steps"], "mean": summary["final_mean"], "final": 1}
     tune.report(result)
