@@ -70,7 +70,7 @@ def gather(work: Path, args, seconds: dict) -> dict:
     side = Path(args.side)
     grounding = json.loads((side / "grounding.json").read_text())
     reward = json.loads((side / "reward_eval.json").read_text())
-    learning = json.loads((side / "learning.json").read_text())
+    learning = json.loads((side / "learning.json").read_text()) if (side / "learning.json").is_file() else None
     from zsrm.envs.adapter import load_adapter
     from zsrm.tasks.scene_goals import parse_scene_goal
 
@@ -80,7 +80,7 @@ def gather(work: Path, args, seconds: dict) -> dict:
                for rel in grounding["relations"]["vs_world"]}
     rewards = {g: {name: {k: reward[name][g][k] for k in ("f1", "precision", "recall", "auroc", "positives", "frames")}
                     for name in ("zsrm", "base")} for g in GOALS}
-    ppo = {r: cells_for(learning, GOALS[0], r) for r in ("oracle", "zsrm", "random")}
+    ppo = {r: cells_for(learning, GOALS[0], r) for r in ("oracle", "zsrm", "random")} if learning else None
     return {
         "scene": SCENE, "goals": list(GOALS),
         "labeler_f1": {rel: labeler[rel]["f1"] for rel in used},
@@ -90,7 +90,8 @@ def gather(work: Path, args, seconds: dict) -> dict:
         "reward_f1": {g: {name: rewards[g][name]["f1"] for name in ("zsrm", "base")} for g in GOALS},
         "reward": rewards,
         "ppo": {"goal": GOALS[0], "steps": args.steps, **ppo,
-                "zsrm_over_oracle": ppo["zsrm"]["mean"] / ppo["oracle"]["mean"] if ppo["oracle"]["mean"] else None},
+                "zsrm_over_oracle": ppo["zsrm"]["mean"] / ppo["oracle"]["mean"] if ppo["oracle"]["mean"] else None}
+        if ppo else None,
         "meta": {"command": "python benchmarks/own_scene.py" + "".join(f" {a}" for a in sys.argv[1:]),
                  "stages": {name: "zsrm " + shlex.join(cmd) for name, cmd, _ in stages(work, args)},
                  "stage_seconds": seconds, "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU",
@@ -113,7 +114,7 @@ def main(argv=None):
     parser.add_argument("--finetune-steps", type=int, default=3000)
     parser.add_argument("--steps", type=int, default=200_000, help="env steps of each PPO trial")
     parser.add_argument("--num-cpus", type=int, default=2)
-    parser.add_argument("--until", default=None, help="stop after this stage")
+    parser.add_argument("--until", default=None, help="run no stage after this one, then gather what is there")
     parser.add_argument("--dry-run", action="store_true", help="print the stages' commands and stop")
     parser.add_argument("--side", default="results/own_scene", help="folder of the stages' measurements")
     parser.add_argument("--out", default="results/own_scene.json")
@@ -134,7 +135,7 @@ def main(argv=None):
             times_file.parent.mkdir(parents=True, exist_ok=True)
             times_file.write_text(json.dumps(seconds, indent=1))
         if name == args.until:
-            return 0
+            break
     if args.dry_run:
         return 0
     from zsrm.common.files import write_json
@@ -142,7 +143,10 @@ def main(argv=None):
     result = gather(work, args, seconds)
     write_json(args.out, result, indent=1)
     print(json.dumps({k: result[k] for k in ("labeler_f1", "reward_f1")}, indent=1))
-    print(f"PPO on {GOALS[0]!r}: " + ", ".join(f"{r} {result['ppo'][r]['mean']:.1f}" for r in ("oracle", "zsrm", "random")))
+    if result["ppo"]:
+        print(f"PPO on {GOALS[0]!r}: " + ", ".join(f"{r} {result['ppo'][r]['mean']:.1f}" for r in ("oracle", "zsrm", "random")))
+    else:
+        print("PPO: the sweep has not run (--until stopped before it)")
     print(f"wrote {args.out}")
     return 0
 
