@@ -151,13 +151,9 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
           device: str = "cpu", env_workers: int = 1) -> dict:
     """Train (or resume) one PPO run; returns the summary written to ``out/summary.json``.
 
-    ``on_eval(row)`` is called after each evaluation (the sweep reports it to Ray Tune).
-    ``device`` ('cpu', 'cuda', 'auto') runs the VLM trunk and PPO's networks there; it is not
-    part of the run's config, so a run started on a GPU resumes on a CPU and the other way.
-    ``env_workers``: processes that step the training envs (``zsrm train``'s default is
-    :func:`auto_env_workers`; more than 1 starts processes by spawn, so a script that calls this
-    needs ``if __name__ == "__main__":``); not part of the config either, as the numbers are
-    the same (a sweep runs one trial per core with 1)."""
+    ``on_eval(row)`` is called after each evaluation (the sweep reports it to Ray Tune). Neither
+    ``device`` ('cpu', 'cuda', 'auto': where the VLM trunk and PPO's networks run) nor
+    ``env_workers`` (:func:`auto_env_workers`) is in the run's config: a run resumes on any."""
     from stable_baselines3.common.logger import configure
     from tqdm import tqdm
 
@@ -236,8 +232,11 @@ def resolve_device(device: str) -> str:
 
 
 def auto_env_workers(cfg: TrainConfig) -> int:
-    """Two processes step the scenes of a run of 8 or more envs on a machine with two cores or
-    more for it (the learner keeps its one torch thread on the first), else one."""
+    """``zsrm train``'s env workers: two processes step the scenes of a run of 8 or more envs on
+    a machine with two cores or more for it (the learner keeps its one torch thread), else one.
+    The numbers are the same either way (:mod:`zsrm.rl.workers`); a sweep runs each trial with
+    one. More than one starts processes by spawn: a script calling :func:`train` with them
+    needs ``if __name__ == "__main__":``."""
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
