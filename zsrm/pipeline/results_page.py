@@ -105,7 +105,7 @@ def _scripted(d: dict) -> str:
     return f"{spread} on each of {len(rates)} tasks"
 
 
-LEARNING = "zsrm sweep --tasks stack place_right push_close --rewards oracle zsrm random --seeds 0 1 2"
+LEARNING = "zsrm sweep --tasks stack place_right push_close --rewards oracle zsrm random --seeds 0 1 2 3 4"
 FIGURE6 = ("zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity "
            "random --seeds 0 1 2 --out results/rl/summary.json")
 
