@@ -61,7 +61,7 @@ class TextWhitener(nn.Module):
 @lru_cache(maxsize=None)
 def noun_phrases(text: str) -> tuple[str, ...]:
     """The object phrases of a caption or goal, in order ("red block", "blue block"; an own
-    scene's "red cylinder", "wooden bowl"); () if the text is not one zsrm reads."""
+    scene's "red mug", "blue plate"); () if the text is not one zsrm reads."""
     denied = complement_of(text)
     if denied is not None:
         return denied.phrases

@@ -48,7 +48,7 @@ IMPLIED_BY = {"in_between": frozenset({"left_of", "right_of"}), "inside_of": fro
 # tilted camera, and which of them wins on a frame with the block beside the box is chance.
 COMPLEMENTS = {"close_to": ("far_from", "far from"), "inside_of": ("outside_of", "outside of")}
 COMPLEMENT_CAMERA = {name: RELATIONS[rel].camera for rel, (name, _) in COMPLEMENTS.items()}
-# An object phrase: "red block", the box (one word), or an own scene's ("orange cylinder").
+# An object phrase: "red block", the box (one word), or an own scene's ("orange mug").
 _PHRASE = r"([a-z]+(?: [a-z]+)*)"
 _COMPLEMENT_RE = {name: re.compile(rf"^an? {_PHRASE} {words} an? {_PHRASE}$") for name, words in COMPLEMENTS.values()}
 
@@ -139,7 +139,7 @@ def negative_texts(task: str | Task) -> list[str]:
 
 def complement_of(caption: str) -> "Task | SceneGoal | None":
     """For a complement caption ("a red block far from a blue block") the task it denies; over
-    an own scene's phrases ("a red cylinder far from an orange cylinder") its SceneGoal."""
+    an own scene's phrases ("a red mug far from an orange plate") its SceneGoal."""
     for relation, (name, _) in COMPLEMENTS.items():
         m = _COMPLEMENT_RE[name].match(caption)
         if m:

@@ -124,8 +124,8 @@ def read_canonical(text: str) -> SceneGoal:
     own scene's captions) without the scene's object list: the one reading whose text gives
     ``text`` back. GoalError when none does, or more than one.
 
-    >>> read_canonical("an orange cylinder close to a wooden bowl").objects
-    ('orange cylinder', 'wooden bowl')
+    >>> read_canonical("an orange mug close to a blue plate").objects
+    ('orange mug', 'blue plate')
     """
     words, tokens, found = r"[a-z]+(?: [a-z]+)*", text.split(), []
     for name, rel in RELATIONS.items():

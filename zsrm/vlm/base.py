@@ -153,7 +153,7 @@ def pixels_from_images(images: ImageBatch, size: int, mean, std, crop: bool = Tr
     """
     if isinstance(images, np.ndarray) and images.ndim == 4 and len(images):
         _check_image(_check_dtype(images)[0], "image 0")  # one batch, one shape: no list to split and stack
-        arrays, by_shape = images, {images.shape[1:]: slice(None)}
+        arrays, by_shape = images if images.flags.writeable else images.copy(), {images.shape[1:]: slice(None)}
     else:
         arrays = image_batch(images)
         by_shape = {}
