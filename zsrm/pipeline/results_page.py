@@ -237,6 +237,8 @@ OTHER = [
     ("multitask/choice/trials/*", "their trial summaries"),
     ("own_scene/*", "the own-scene stages' measurements (the labeler, the reward, each stage's seconds), written by "
      "benchmarks/own_scene.py"),
+    ("own_scene/pilots/**", "300k-step oracle runs on the example's goals: PPO does not learn them yet "
+     "(docs/own-scene.md, step 12)"),
     ("rl/**", "learning runs, Figures 4 and 6 trials, the training-speed profile, pilots and reward-hacking "
      "diagnostics (docs/training.md, docs/training-speed.md)"),
 ]
