@@ -1,13 +1,7 @@
 """The training envs stepped by worker processes (``zsrm train --env-workers``): the same
 numbers as one process, step by step and for a whole run, a run resumed from its checkpoint
 included."""
-import json
-import os
 import shutil
-import signal
-import subprocess
-import sys
-import time
 
 import numpy as np
 import pytest
@@ -46,7 +40,7 @@ def test_workers_step_the_envs_as_one_process_does():
 
 
 def test_a_run_with_two_env_workers_is_the_run_with_one_and_resumes_to_it(tmp_path):
-    from test_rl import eval_rows, same_weights
+    from test_rl import eval_rows, kill_after_first_checkpoint, same_weights
 
     # rollouts of 3 envs x 8 decisions x action repeat 4 = 96 env steps: a checkpoint after each
     cfg = TrainConfig(goal="push_close", reward="oracle", steps=384, eval_every=192, checkpoint_every=96,
@@ -58,18 +52,7 @@ def test_a_run_with_two_env_workers_is_the_run_with_one_and_resumes_to_it(tmp_pa
     assert same_weights(tmp_path / "two" / "policy" / "model.safetensors", tmp_path / "one" / "policy" / "model.safetensors")
     # killed after its first checkpoint with two workers, resumed with one and with two
     cut = tmp_path / "cut"
-    code = ("import json, sys; from zsrm.rl import TrainConfig, train; "
-            f"train(TrainConfig(**json.loads(sys.argv[1])), {str(cut)!r}, progress=False, env_workers=2)")
-    proc = subprocess.Popen([sys.executable, "-c", code, json.dumps(cfg.to_dict())],
-                            env={**os.environ, "OMP_NUM_THREADS": "1"})
-    state = cut / "checkpoint" / "state.json"
-    deadline = time.time() + 300
-    while not state.is_file() and proc.poll() is None and time.time() < deadline:
-        time.sleep(0.05)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
-    assert state.is_file() and not (cut / "summary.json").exists()
-    assert 0 < json.loads(state.read_text())["env_steps"] < 384
+    assert 0 < kill_after_first_checkpoint(cfg.to_dict(), cut, env_workers=2) < 384
     shutil.copytree(cut, tmp_path / "cut2")
     for folder, workers in ((cut, 1), (tmp_path / "cut2", 2)):
         resumed = train(cfg, folder, progress=False, env_workers=workers)

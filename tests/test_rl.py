@@ -51,6 +51,22 @@ def same_weights(a, b) -> bool:
     return wa.keys() == wb.keys() and all(np.array_equal(wa[k], wb[k]) for k in wa)
 
 
+def kill_after_first_checkpoint(cfg: dict, folder, env_workers: int = 1) -> int:
+    """Train ``cfg`` into ``folder`` in another process, SIGKILL it once its first checkpoint is
+    written; the env steps the checkpoint holds."""
+    code = ("import json, sys; from zsrm.rl import TrainConfig, train; "
+            f"train(TrainConfig(**json.loads(sys.argv[1])), {str(folder)!r}, progress=False, env_workers={env_workers})")
+    proc = subprocess.Popen([sys.executable, "-c", code, json.dumps(cfg)], env={**os.environ, "OMP_NUM_THREADS": "1"})
+    state = folder / "checkpoint" / "state.json"
+    deadline = time.time() + 300
+    while not state.is_file() and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert state.is_file() and not (folder / "summary.json").exists()
+    return json.loads(state.read_text())["env_steps"]
+
+
 @pytest.mark.parametrize("reward", ["oracle", "curiosity"])
 def test_killed_run_resumes_to_the_same_run(tmp_path, reward):
     """Killed (SIGKILL) after its first checkpoint and resumed: the same eval.csv rows, final
@@ -59,17 +75,7 @@ def test_killed_run_resumes_to_the_same_run(tmp_path, reward):
     whole = train(TrainConfig(**cfg), tmp_path / "whole", progress=False)
 
     cut = tmp_path / "cut"
-    code = ("import json, sys; from zsrm.rl import TrainConfig, train; "
-            f"train(TrainConfig(**json.loads(sys.argv[1])), {str(cut)!r}, progress=False)")
-    proc = subprocess.Popen([sys.executable, "-c", code, json.dumps(cfg)], env={**os.environ, "OMP_NUM_THREADS": "1"})
-    state = cut / "checkpoint" / "state.json"
-    deadline = time.time() + 300
-    while not state.is_file() and proc.poll() is None and time.time() < deadline:
-        time.sleep(0.05)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
-    assert state.is_file() and not (cut / "summary.json").exists()
-    killed_at = json.loads(state.read_text())["env_steps"]
+    killed_at = kill_after_first_checkpoint(cfg, cut)
     assert 0 < killed_at < 768
     resumed = train(TrainConfig(**cfg), cut, progress=False)
 
