@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import replace
+from functools import lru_cache
 
 from zsrm.tasks.catalogue import as_task
 from zsrm.tasks.language import GoalError, Task, parse_goal, with_article
@@ -71,9 +72,11 @@ def caption_relation_camera(caption: str) -> tuple[str, str]:
     return relation, RELATIONS[relation].camera
 
 
+@lru_cache(maxsize=None)
 def read_caption(caption: str) -> "Task | SceneGoal":
     """A caption as the labeler writes it: a Task where zsrm's grammar reads it, else the
     SceneGoal of an own scene's canonical sentence (whose phrases zsrm's grammar does not know).
+    Kept per caption (both are frozen): training reads each caption's negatives at every step.
     Goals a user writes are read strictly (:func:`~zsrm.tasks.catalogue.as_task`, or
     :func:`~zsrm.tasks.scene_goals.parse_scene_goal` with the scene's phrases): an unknown
     colour there is an error, not an own scene's object."""
