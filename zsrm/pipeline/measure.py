@@ -320,7 +320,7 @@ class EvalReward:
         out = write_json(results, self.out, indent=1, default=float)
         if self.curves:
             self._write_curves(models, base_vlm, frames)
-        self._print_table(results, models)
+        self._print_table(results, models, [*self.tasks, *(f"{d}_distractor" for d in self.distractor_tasks)])
         print(f"wrote {out}")
         return 0 if np.isfinite([results[k][t]["f1"] for k in models for t in self.tasks]).all() else 1
 
@@ -361,10 +361,7 @@ class EvalReward:
             "machine": platform.platform(),
         }
         out = write_json(results, self.out, indent=1, default=float)
-        width = max(14, *(len(k) + 8 for k in models))
-        print(f"{'goal':<52}" + "".join(f"{k + ' F1':>{width}}" for k in models))
-        for t in frames:
-            print(f"{t:<52}" + "".join(f"{results[k][t]['f1']:>{width}.3f}" for k in models))
+        self._print_table(results, models, list(frames))
         print(f"wrote {out}")
         return 0
 
@@ -426,12 +423,12 @@ class EvalReward:
                                                  seed=self.seed + 999)
             print(f"wrote {csv_path} and {png_path}")
 
-    def _print_table(self, results: dict, models: dict) -> None:
-        width = max(14, *(len(k) + 8 for k in models))
-        header = f"{'task':<12}" + "".join(f"{k + ' F1':>{width}}" for k in models)
+    def _print_table(self, results: dict, models: dict, tasks: list[str]) -> None:
+        width, first = max(14, *(len(k) + 8 for k in models)), max(12, *(len(t) + 2 for t in tasks))
+        header = f"{'task':<{first}}" + "".join(f"{k + ' F1':>{width}}" for k in models)
         print(header + "".join(f"{k + ' AUROC':>{width}}" for k in models))
-        for t in [*self.tasks, *(f"{d}_distractor" for d in self.distractor_tasks)]:
-            row = f"{t:<12}" + "".join(f"{results[k][t]['f1']:>{width}.3f}" for k in models)
+        for t in tasks:
+            row = f"{t:<{first}}" + "".join(f"{results[k][t]['f1']:>{width}.3f}" for k in models)
             print(row + "".join(f"{results[k][t]['auroc']:>{width}.3f}" for k in models))
 
 
