@@ -12,9 +12,10 @@ work; ``--dry-run`` prints them):
    true-coordinate captions (the scene's oracle, evaluation only) label the evaluations;
 4. ``zsrm eval-grounding``: the labeler's F1 against the scene's oracle, per relation;
 5. ``zsrm finetune --student``: the reward model, on stage 2's Grad-CAM captions only;
-6. ``zsrm eval-reward --scene``: the binarised reward's F1 against the oracle on two goals,
+6. ``zsrm eval-reward --scene``: the binarised reward's F1 against the oracle on three goals,
    the base VLM binarised the same way beside it;
-7. ``zsrm sweep --scene``: PPO from pixels with the oracle, zsrm and random rewards, 3 seeds.
+7. ``zsrm sweep --scene``: PPO from pixels with the oracle, zsrm and random rewards on one goal,
+   3 seeds, in the adapter's task scenes.
 
     python benchmarks/own_scene.py            # about 1.5 hours on 2 cores
 """
@@ -31,7 +32,12 @@ import time
 from pathlib import Path
 
 SCENE = "examples.own_scene.adapter:OwnScene"
-GOALS = ("a red cylinder on the right of a purple cylinder", "an orange cylinder on the left of a red cylinder")
+GOALS = ("a red cylinder on the right of a purple cylinder", "an orange cylinder on the left of a red cylinder",
+         "a red cylinder behind a purple cylinder")
+# The goal PPO learns: the pusher starts in front of an object (the adapter's task scenes), so
+# pushing one back past another is the easier push; pushing one sideways past
+# another, the other goals' relations, was not (docs/own-scene.md, step 12).
+PPO_GOAL = GOALS[2]
 
 
 def stages(work: Path, args) -> list[tuple[str, list[str], Path]]:
@@ -58,7 +64,7 @@ def stages(work: Path, args) -> list[tuple[str, list[str], Path]]:
         ("eval-reward", ["eval-reward", *scene, "--data", str(held_out), "--zsrm", str(work / "student"),
                          "--base", str(vlm), "--tasks", *GOALS, "--out", str(side / "reward_eval.json"),
                          "--curves", "", "--quiet"], side / "reward_eval.json"),
-        ("sweep", ["sweep", *scene, "--tasks", GOALS[0], "--rewards", "oracle", "zsrm", "random",
+        ("sweep", ["sweep", *scene, "--tasks", PPO_GOAL, "--rewards", "oracle", "zsrm", "random",
                    "--seeds", "0", "1", "2", "--steps", str(args.steps), "--vlm", str(vlm),
                    "--reward-model", str(work / "student"), "--root", str(work / "rl"),
                    "--num-cpus", str(args.num_cpus), "--out", str(side / "learning.json")],
@@ -80,7 +86,7 @@ def gather(work: Path, args, seconds: dict) -> dict:
                for rel in grounding["relations"]["vs_world"]}
     rewards = {g: {name: {k: reward[name][g][k] for k in ("f1", "precision", "recall", "auroc", "positives", "frames")}
                     for name in ("zsrm", "base")} for g in GOALS}
-    ppo = {r: cells_for(learning, GOALS[0], r) for r in ("oracle", "zsrm", "random")} if learning else None
+    ppo = {r: cells_for(learning, PPO_GOAL, r) for r in ("oracle", "zsrm", "random")} if learning else None
     return {
         "scene": SCENE, "goals": list(GOALS),
         "labeler_f1": {rel: labeler[rel]["f1"] for rel in used},
@@ -89,7 +95,7 @@ def gather(work: Path, args, seconds: dict) -> dict:
                                "exploration", "images": grounding.get("meta", {}).get("images")},
         "reward_f1": {g: {name: rewards[g][name]["f1"] for name in ("zsrm", "base")} for g in GOALS},
         "reward": rewards,
-        "ppo": {"goal": GOALS[0], "steps": args.steps, **ppo,
+        "ppo": {"goal": PPO_GOAL, "steps": args.steps, **ppo,
                 "zsrm_over_oracle": ppo["zsrm"]["mean"] / ppo["oracle"]["mean"] if ppo["oracle"]["mean"] else None}
         if ppo else None,
         "meta": {"command": "python benchmarks/own_scene.py" + "".join(f" {a}" for a in sys.argv[1:]),
@@ -112,7 +118,7 @@ def main(argv=None):
     parser.add_argument("--images", type=int, default=4000, help="exploration images the reward model trains on")
     parser.add_argument("--eval-images", type=int, default=1000, help="held-out exploration images")
     parser.add_argument("--finetune-steps", type=int, default=3000)
-    parser.add_argument("--steps", type=int, default=200_000, help="env steps of each PPO trial")
+    parser.add_argument("--steps", type=int, default=500_000, help="env steps of each PPO trial")
     parser.add_argument("--num-cpus", type=int, default=2)
     parser.add_argument("--until", default=None, help="run no stage after this one, then gather what is there")
     parser.add_argument("--dry-run", action="store_true", help="print the stages' commands and stop")
@@ -144,7 +150,7 @@ def main(argv=None):
     write_json(args.out, result, indent=1)
     print(json.dumps({k: result[k] for k in ("labeler_f1", "reward_f1")}, indent=1))
     if result["ppo"]:
-        print(f"PPO on {GOALS[0]!r}: " + ", ".join(f"{r} {result['ppo'][r]['mean']:.1f}" for r in ("oracle", "zsrm", "random")))
+        print(f"PPO on {PPO_GOAL!r}: " + ", ".join(f"{r} {result['ppo'][r]['mean']:.1f}" for r in ("oracle", "zsrm", "random")))
     else:
         print("PPO: the sweep has not run (--until stopped before it)")
     print(f"wrote {args.out}")

@@ -544,6 +544,32 @@ def test_an_episode_never_starts_in_the_goal_and_a_seed_gives_its_start():
     env.close()
 
 
+def test_a_goals_scenes_are_the_task_env_holding_the_goals_objects_alone():
+    """Training scenes: the task env (task_env_kwargs: objects close together, the pusher in
+    front of one) with the goal's objects alone, seen by the goal's camera."""
+    from zsrm.rl import TrainConfig
+    from zsrm.rl.envs import make_vec
+
+    goal = "a red cylinder behind a purple cylinder"
+    cfg = TrainConfig(goal=goal, scene=SPEC, reward="random", image_size=16, n_envs=2)
+    venv = make_vec(cfg, 2, seed=0)
+    obs = venv.reset()
+    assert list(obs) == ["left"] and obs["left"].shape == (2, 16, 16, 3)
+    base = venv.envs[0].unwrapped
+    assert base.objects == ("red_cylinder", "purple_cylinder") and base.start == "compact"
+    xy = [base.body_position(b)[:2] for b in base.objects]
+    assert all(abs(x) <= 0.085 and abs(y) <= 0.065 for x, y in xy)  # the compact patch, settled
+    venv.close()
+    explore = load_adapter(SPEC).make_env(("cam_high",), 16)  # exploration: every object, anywhere
+    assert explore.unwrapped.start == "anywhere" and len(explore.unwrapped.objects) == 4
+    explore.close()
+
+
+def test_the_example_envs_start_is_checked():
+    with pytest.raises(ValueError, match="start must be 'anywhere' or 'compact'"):
+        OwnSceneEnv(start="near")
+
+
 # --- zsrm train on the example scene ----------------------------------------------------------
 class _SideBySide(gym.Wrapper):
     """The example env with the red and orange cylinders set side by side at the back, out of the
@@ -569,8 +595,8 @@ class _SideBySide(gym.Wrapper):
 
 
 class _InGoalFromTheFirstStep(OwnScene):
-    def make_env(self, cameras, image_size=64, objects=None):
-        return _SideBySide(super().make_env(cameras, image_size, objects))
+    def make_env(self, cameras, image_size=64, objects=None, task=False):
+        return _SideBySide(super().make_env(cameras, image_size, objects, task))
 
 
 TINY_RL = ["--n-envs", "4", "--n-steps", "128", "--batch-size", "64", "--n-epochs", "1", "--eval-episodes", "2",

@@ -17,6 +17,8 @@ def test_binary_metrics_on_known_counts():
     assert m["precision"] == pytest.approx(2 / 3) and m["recall"] == pytest.approx(2 / 3)
     assert m["f1"] == pytest.approx(2 / 3) and m["accuracy"] == pytest.approx(4 / 6)
     assert binary_metrics([0, 0], [1, 0])["f1"] == 0.0  # nothing predicted: 0, not a division error
+    empty = binary_metrics([], [])  # no frames (a goal whose objects no frame holds): no warning
+    assert empty["f1"] == 0.0 and np.isnan(empty["accuracy"])
 
 
 def test_auroc_and_best_threshold():

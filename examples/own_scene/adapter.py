@@ -25,6 +25,9 @@ class OwnScene(SceneAdapter):
     xml = str(Path(__file__).with_name("scene.xml"))
     objects = tuple(BODIES)
     cameras = {"front": "cam_front", "left": "cam_side", "tilted": "cam_high"}
+    # Exploration: objects anywhere on the table. Goals: objects near the centre, the pusher just
+    # in front of one of them, so that a few pushes reach the goal (as zsrm's own task scenes start).
+    task_env_kwargs = {"start": "compact"}
     object_width = 0.05  # the cylinders' diameter
     table_height = 0.30  # the table top: the labeler reads the high camera on it in metres
 

@@ -24,6 +24,11 @@ TABLE_TOP = 0.30
 REST_Z = {"bowl": TABLE_TOP + 0.004}  # a body's origin height when it rests on the table
 CYLINDER_REST_Z = TABLE_TOP + 0.03
 PLACE_X, PLACE_Y = 0.19, 0.12  # objects start within these half extents of the table's centre
+# start="compact": the objects within these half extents, 1 cm or more apart, and the pusher
+# just in front of one of them, so that a few pushes change which object is where.
+COMPACT_X, COMPACT_Y = 0.08, 0.06
+PUSHER_RADIUS = 0.02
+RADIUS = {"bowl": 0.049}  # other objects: the cylinders' 0.025
 MAX_MOVE = 0.02  # metres of pusher target motion per step at |action| = 1
 HIDDEN_GROUP = 3
 
@@ -32,13 +37,19 @@ class OwnSceneEnv(gym.Env):
     """Pixels in, pusher motion out.
 
     cameras: which of ``CAMERAS`` to observe; image_size: square image side;
-    objects: which of ``OBJECT_BODIES`` are on the table (the others are hidden away).
+    objects: which of ``OBJECT_BODIES`` are on the table (the others are hidden away);
+    start: "anywhere" (objects anywhere on the table, the pusher anywhere along the front edge)
+    or "compact" (objects near the centre, the pusher just in front of one of them).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 12}
     frame_skip = 10  # 10 x 4 ms per step
 
-    def __init__(self, cameras=CAMERAS, image_size: int = 64, objects=OBJECT_BODIES, render_mode=None):
+    def __init__(self, cameras=CAMERAS, image_size: int = 64, objects=OBJECT_BODIES, render_mode=None,
+                 start: str = "anywhere"):
+        if start not in ("anywhere", "compact"):
+            raise ValueError(f"start must be 'anywhere' or 'compact', got {start!r}")
+        self.start = start
         self.cameras = tuple(cameras)
         for cam in self.cameras:
             if cam not in CAMERAS:
@@ -86,17 +97,25 @@ class OwnSceneEnv(gym.Env):
         super().reset(seed=seed)
         mujoco.mj_resetData(self.model, self.data)
         rng, placed = self.np_random, []
+        compact = self.start == "compact"
+        half = (COMPACT_X, COMPACT_Y) if compact else (PLACE_X, PLACE_Y)
         for i, name in enumerate(OBJECT_BODIES):
             if name not in self.objects:
                 self._place(name, (3.0 + i, 3.0, 0.1))
                 continue
-            for _ in range(200):  # centres at least 9 cm apart (the bowl is 9 cm wide)
-                xy = rng.uniform((-PLACE_X, -PLACE_Y), (PLACE_X, PLACE_Y))
-                if all(np.linalg.norm(xy - q) > 0.09 for q in placed):
+            for _ in range(200):  # anywhere: centres 9 cm apart (the bowl's width); compact: 1 cm between edges
+                xy = rng.uniform(np.negative(half), half)
+                if all(np.linalg.norm(xy - q) > (RADIUS.get(name, 0.025) + r + 0.01 if compact else 0.09)
+                       for q, r in placed):
                     break
-            placed.append(xy)
+            placed.append((xy, RADIUS.get(name, 0.025)))
             self._place(name, (*xy, REST_Z.get(name, CYLINDER_REST_Z)))
         start = rng.uniform((-0.2, -0.14), (0.2, -0.11))  # the pusher starts along the front edge
+        if compact:  # ... or just in front of one of the objects, where nothing is in its way
+            xy, radius = placed[rng.integers(len(placed))]
+            ready = xy + (rng.uniform(-0.01, 0.01), -(radius + PUSHER_RADIUS + 0.015))
+            if all(np.linalg.norm(ready - q) >= r + PUSHER_RADIUS + 0.01 for q, r in placed if q is not xy):
+                start = ready
         self.data.qpos[:2] = start
         self.data.ctrl[:] = start
         mujoco.mj_forward(self.model, self.data)

@@ -80,6 +80,7 @@ class SceneAdapter:
     env_id: str | None = None  # a registered gymnasium id
     xml: str | None = None  # the scene's MuJoCo XML: the env itself when there is no env_id, else its cameras are checked early
     env_kwargs: Mapping = {}  # further keywords of gym.make (or of XmlSceneEnv)
+    task_env_kwargs: Mapping = {}  # keywords added for the scenes a policy trains and is evaluated in (e.g. a start layout)
     objects: tuple[str, ...] = ()  # a noun phrase per object, as goals will name them
     cameras: Mapping[str, str] = {}  # Table 1 role (front, left, tilted) -> the env's camera name
     bodies: Mapping[str, str] = {}  # PRIVILEGED, optional: phrase -> the MuJoCo body whose position is the object's
@@ -106,17 +107,20 @@ class SceneAdapter:
         """What the env's ``objects`` keyword takes for these phrases (default: the phrases)."""
         return tuple(phrases)
 
-    def make_env(self, cameras: tuple[str, ...], image_size: int = 64, objects: tuple[str, ...] | None = None) -> gym.Env:
+    def make_env(self, cameras: tuple[str, ...], image_size: int = 64, objects: tuple[str, ...] | None = None,
+                 task: bool = False) -> gym.Env:
         """An env observing ``cameras`` (the env's own camera names) at ``image_size``, holding
-        ``objects`` (phrases; all of them when None or when the env cannot hold fewer)."""
+        ``objects`` (phrases; all of them when None or when the env cannot hold fewer). ``task``:
+        a scene a policy trains or is evaluated in (``task_env_kwargs`` apply); else exploration."""
+        env_kwargs = {**self.env_kwargs, **(self.task_env_kwargs if task else {})}
         if not self.env_id and self.xml:
             from zsrm.envs.xml_scene import XmlSceneEnv
 
-            env = XmlSceneEnv(self.xml, cameras=tuple(cameras), image_size=int(image_size), **self.env_kwargs)
+            env = XmlSceneEnv(self.xml, cameras=tuple(cameras), image_size=int(image_size), **env_kwargs)
             return gym.wrappers.TimeLimit(env, max_episode_steps=100)  # zsrm's episodes (zsrm.envs.EPISODE_STEPS)
         if not self.env_id:
             raise SceneAdapterError(f"{self.name}: give env_id (a gymnasium id) or xml, or override make_env")
-        kwargs = dict(self.env_kwargs, cameras=tuple(cameras), image_size=int(image_size))
+        kwargs = dict(env_kwargs, cameras=tuple(cameras), image_size=int(image_size))
         if self.holds_subsets:
             kwargs["objects"] = self.env_objects(tuple(self.objects if objects is None else objects))
         try:

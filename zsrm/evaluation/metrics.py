@@ -22,13 +22,14 @@ def auroc(scores, truth) -> float:
 
 
 def binary_metrics(predicted, truth) -> dict:
-    """Precision, recall and F1 of binary predictions (0 where undefined), and the counts."""
+    """Precision, recall and F1 of binary predictions (0 where undefined), and the counts
+    (accuracy NaN over no frames)."""
     p, t = np.asarray(predicted, bool), np.asarray(truth, bool)
     tp, fp, fn = int((p & t).sum()), int((p & ~t).sum()), int((~p & t).sum())
     precision = tp / (tp + fp) if tp + fp else 0.0
     recall = tp / (tp + fn) if tp + fn else 0.0
     f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
-    return {"precision": precision, "recall": recall, "f1": f1, "accuracy": float((p == t).mean()),
+    return {"precision": precision, "recall": recall, "f1": f1, "accuracy": float((p == t).mean()) if p.size else float("nan"),
             "predicted_positive": int(p.sum())}
 
 

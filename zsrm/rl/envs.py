@@ -65,8 +65,9 @@ def vec_of(env_fns: list, seed: int, workers: int = 1) -> VecEnv:
 
 def make_scene_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
                    distractors: tuple[str, ...] = (), workers: int = 1) -> VecEnv:
-    """:func:`make_vec` on a user's own scene: its adapter's env observing the goal's role camera,
-    all its objects, as its own reset lays them out."""
+    """:func:`make_vec` on a user's own scene: its adapter's task env (``task_env_kwargs``)
+    observing the goal's role camera and holding the goal's objects (all of them where the env
+    cannot hold fewer), as zsrm's own task scenes do, laid out by the env's own reset."""
     from zsrm.envs.adapter import check_env, load_adapter
     from zsrm.envs.scene_task import SceneTask
 
@@ -79,7 +80,8 @@ def make_scene_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen
     role = goal_camera(cfg.goal, cfg.scene)
 
     def make():
-        env = check_env(adapter, adapter.make_env((adapter.roles[role],), cfg.image_size), roles=(role,))
+        env = check_env(adapter, adapter.make_env((adapter.roles[role],), cfg.image_size, goal.objects, task=True),
+                        roles=(role,))
         return gym.wrappers.TimeLimit(SceneTask(env, adapter, goal, cfg.action_repeat),
                                       max_episode_steps=EPISODE_STEPS // cfg.action_repeat)
 
