@@ -570,6 +570,26 @@ def test_the_example_envs_start_is_checked():
         OwnSceneEnv(start="near")
 
 
+def test_parse_goal_reads_a_goal_over_the_scenes_objects(capsys):
+    assert main(["parse-goal", "--scene", SPEC, "--json", "the red cylinder inside of the wooden bowl"]) == 0
+    reading = json.loads(capsys.readouterr().out)
+    assert reading["objects"] == ["red cylinder", "wooden bowl"] and reading["relation"] == "inside_of"
+    assert reading["canonical"] == "a red cylinder inside of a wooden bowl" and reading["camera"] == "tilted"
+    assert main(["parse-goal", "--scene", SPEC, "a red mug behind a purple cylinder"]) == 2
+    assert "unknown object 'red mug'" in _one_line(capsys.readouterr().err.strip().removeprefix("zsrm parse-goal: error: "))
+
+
+def test_rollout_random_on_the_scene(tmp_path, capsys):
+    out = tmp_path / "random.json"
+    assert main(["rollout", "random:a red cylinder behind a purple cylinder", "--scene", SPEC, "--episodes", "2",
+                 "--out", str(out)]) == 0
+    rewards = json.loads(out.read_text())["episode_rewards"]
+    assert len(rewards) == 2 and all(0 <= r <= 100 for r in rewards)
+    capsys.readouterr()
+    assert main(["rollout", str(tmp_path), "--scene", SPEC]) == 2
+    assert "--scene is for random:GOAL" in capsys.readouterr().err
+
+
 # --- zsrm train on the example scene ----------------------------------------------------------
 class _SideBySide(gym.Wrapper):
     """The example env with the red and orange cylinders set side by side at the back, out of the

@@ -25,9 +25,12 @@ class ParseGoal:
 
     text: tuple[str, ...] = field(metadata={"positional": True, "split": False, "metavar": "TEXT"})  # the goal sentence
     json: bool = False  # print the reading as one JSON object
+    scene: str | None = None  # your own scene (module:Class or a registered id): read the goal over its objects
 
     def run(self) -> int:
         sentence = " ".join(self.text)
+        if self.scene:
+            return self.run_scene(sentence)
         task = parse_goal(sentence)
         reading = {"text": sentence, "relation": task.relation, "objects": list(task.objects), "shape": task.shape,
                    "canonical": task.text, "scene": task.scene, "camera": RELATIONS[task.relation].camera}
@@ -36,6 +39,19 @@ class ParseGoal:
         else:
             print(f"relation:  {task.relation}\nobjects:   {', '.join(task.objects)} ({task.shape}s, in order)\n"
                   f"canonical: {task.text}")
+        return 0
+
+    def run_scene(self, sentence: str) -> int:
+        from zsrm.rl.goals import scene_goal
+
+        goal = scene_goal(sentence, self.scene)
+        reading = {"text": sentence, "relation": goal.relation, "objects": list(goal.objects), "canonical": goal.text,
+                   "scene": self.scene, "camera": RELATIONS[goal.relation].camera}
+        if self.json:
+            print(json.dumps(reading))
+        else:
+            print(f"relation:  {goal.relation}\nobjects:   {', '.join(goal.objects)} (in order)\n"
+                  f"canonical: {goal.text}")
         return 0
 
 

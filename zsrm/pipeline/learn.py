@@ -62,6 +62,7 @@ class Rollout:
     spread: Literal["seen", "unseen"] = "seen"  # start-state spread: one block width (seen) or two (unseen)
     gif: str | None = None  # write a GIF of the first episode here
     out: str | None = None  # JSON path for the result
+    scene: str | None = None  # with random:GOAL, your own scene (module:Class or a registered id) whose objects GOAL names
 
     def run(self) -> int:
         from zsrm.rl.evaluate import rollout
@@ -69,7 +70,7 @@ class Rollout:
         for path in (self.out, self.gif):
             if path:
                 check_writable(path)
-        result = rollout(self.policy, self.episodes, self.seed, self.spread, self.gif)
+        result = rollout(self.policy, self.episodes, self.seed, self.spread, self.gif, self.scene)
         print(f"oracle episode reward {result['mean']:.1f} +- {result['se']:.1f}, "
               f"success {result['success_rate']:.2f} over {self.episodes} episodes")
         if self.gif:

@@ -106,19 +106,22 @@ def random_actions(action_space, seed: int) -> Callable[[dict], np.ndarray]:
 
 
 def rollout(policy: str | Path, episodes: int = 10, seed: int = 0, spread: str = "seen",
-            gif: str | Path | None = None) -> dict:
+            gif: str | Path | None = None, scene: str | None = None) -> dict:
     """The oracle episode reward of a saved policy (a folder written by ``zsrm train``) or of
-    ``"random:GOAL"`` over seeded episodes; with ``gif``, a GIF of the first episode."""
+    ``"random:GOAL"`` (on your own ``scene`` when given) over seeded episodes; with ``gif``, a
+    GIF of the first episode."""
     from zsrm.rl.features import policy_view
     from zsrm.rl.policy import PolicyBundle
     from zsrm.vlm import load_vlm
 
     if isinstance(policy, str) and policy.startswith("random:"):
-        cfg = TrainConfig(goal=policy.split(":", 1)[1], reward="random")
+        cfg = TrainConfig(goal=policy.split(":", 1)[1], reward="random", scene=scene)
         probe = make_vec(cfg, 1, 0)
         act, features = random_actions(probe.action_space, seed), None
         probe.close()
     else:
+        if scene:
+            raise ValueError("--scene is for random:GOAL; a trained policy's folder names its scene")
         bundle = PolicyBundle.load(policy)
         cfg, vlm = bundle.cfg, load_vlm(bundle.cfg.vlm)
 
