@@ -34,9 +34,10 @@ from pathlib import Path
 SCENE = "examples.own_scene.adapter:OwnScene"
 GOALS = ("a red cylinder on the right of a purple cylinder", "an orange cylinder on the left of a red cylinder",
          "a red cylinder behind a purple cylinder")
-# The goal PPO learns: the pusher starts in front of an object (the adapter's task scenes), so
-# pushing one back past another is the easier push; pushing one sideways past
-# another, the other goals' relations, was not (docs/own-scene.md, step 12).
+# The goal PPO learns: in the adapter's task scenes the pusher starts in front of an object and
+# moves in 1 cm steps, so pushing one back past another is a push straight ahead; pushing one
+# sideways past another, the other goals' relations, needs the pusher to go round first
+# (docs/own-scene.md, step 12).
 PPO_GOAL = GOALS[2]
 
 
@@ -118,7 +119,7 @@ def main(argv=None):
     parser.add_argument("--images", type=int, default=4000, help="exploration images the reward model trains on")
     parser.add_argument("--eval-images", type=int, default=1000, help="held-out exploration images")
     parser.add_argument("--finetune-steps", type=int, default=3000)
-    parser.add_argument("--steps", type=int, default=500_000, help="env steps of each PPO trial")
+    parser.add_argument("--steps", type=int, default=300_000, help="env steps of each PPO trial")
     parser.add_argument("--num-cpus", type=int, default=2)
     parser.add_argument("--until", default=None, help="run no stage after this one, then gather what is there")
     parser.add_argument("--dry-run", action="store_true", help="print the stages' commands and stop")

@@ -546,7 +546,7 @@ def test_an_episode_never_starts_in_the_goal_and_a_seed_gives_its_start():
 
 def test_a_goals_scenes_are_the_task_env_holding_the_goals_objects_alone():
     """Training scenes: the task env (task_env_kwargs: objects close together, the pusher in
-    front of one) with the goal's objects alone, seen by the goal's camera."""
+    front of one, finer steps) with the goal's objects alone, seen by the goal's camera."""
     from zsrm.rl import TrainConfig
     from zsrm.rl.envs import make_vec
 
@@ -556,12 +556,13 @@ def test_a_goals_scenes_are_the_task_env_holding_the_goals_objects_alone():
     obs = venv.reset()
     assert list(obs) == ["left"] and obs["left"].shape == (2, 16, 16, 3)
     base = venv.envs[0].unwrapped
-    assert base.objects == ("red_cylinder", "purple_cylinder") and base.start == "compact"
+    assert base.objects == ("red_cylinder", "purple_cylinder") and (base.start, base.step_size) == ("compact", 0.01)
     xy = [base.body_position(b)[:2] for b in base.objects]
     assert all(abs(x) <= 0.085 and abs(y) <= 0.065 for x, y in xy)  # the compact patch, settled
     venv.close()
     explore = load_adapter(SPEC).make_env(("cam_high",), 16)  # exploration: every object, anywhere
-    assert explore.unwrapped.start == "anywhere" and len(explore.unwrapped.objects) == 4
+    assert (explore.unwrapped.start, explore.unwrapped.step_size) == ("anywhere", 0.02)
+    assert len(explore.unwrapped.objects) == 4
     explore.close()
 
 

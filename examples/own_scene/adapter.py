@@ -25,9 +25,10 @@ class OwnScene(SceneAdapter):
     xml = str(Path(__file__).with_name("scene.xml"))
     objects = tuple(BODIES)
     cameras = {"front": "cam_front", "left": "cam_side", "tilted": "cam_high"}
-    # Exploration: objects anywhere on the table. Goals: objects near the centre, the pusher just
-    # in front of one of them, so that a few pushes reach the goal (as zsrm's own task scenes start).
-    task_env_kwargs = {"start": "compact"}
+    # Exploration: objects anywhere on the table, 2 cm pusher steps. Goals: objects near the
+    # centre, the pusher just in front of one of them (as zsrm's own task scenes start) and moving
+    # in 1 cm steps: a random policy's 8 cm decisions (4 control steps) wandered off the objects.
+    task_env_kwargs = {"start": "compact", "step_size": 0.01}
     object_width = 0.05  # the cylinders' diameter
     table_height = 0.30  # the table top: the labeler reads the high camera on it in metres
 

@@ -29,7 +29,7 @@ PLACE_X, PLACE_Y = 0.19, 0.12  # objects start within these half extents of the 
 COMPACT_X, COMPACT_Y = 0.08, 0.06
 PUSHER_RADIUS = 0.02
 RADIUS = {"bowl": 0.049}  # other objects: the cylinders' 0.025
-MAX_MOVE = 0.02  # metres of pusher target motion per step at |action| = 1
+MAX_MOVE = 0.02  # the default step_size
 HIDDEN_GROUP = 3
 
 
@@ -39,17 +39,18 @@ class OwnSceneEnv(gym.Env):
     cameras: which of ``CAMERAS`` to observe; image_size: square image side;
     objects: which of ``OBJECT_BODIES`` are on the table (the others are hidden away);
     start: "anywhere" (objects anywhere on the table, the pusher anywhere along the front edge)
-    or "compact" (objects near the centre, the pusher just in front of one of them).
+    or "compact" (objects near the centre, the pusher just in front of one of them);
+    step_size: metres of pusher target motion per step at |action| = 1.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 12}
     frame_skip = 10  # 10 x 4 ms per step
 
     def __init__(self, cameras=CAMERAS, image_size: int = 64, objects=OBJECT_BODIES, render_mode=None,
-                 start: str = "anywhere"):
+                 start: str = "anywhere", step_size: float = MAX_MOVE):
         if start not in ("anywhere", "compact"):
             raise ValueError(f"start must be 'anywhere' or 'compact', got {start!r}")
-        self.start = start
+        self.start, self.step_size = start, float(step_size)
         self.cameras = tuple(cameras)
         for cam in self.cameras:
             if cam not in CAMERAS:
@@ -126,7 +127,7 @@ class OwnSceneEnv(gym.Env):
     def step(self, action):
         action = np.clip(np.asarray(action, np.float64), -1.0, 1.0)
         lo, hi = self.model.actuator_ctrlrange[:, 0], self.model.actuator_ctrlrange[:, 1]
-        self.data.ctrl[:] = np.clip(self.data.ctrl + MAX_MOVE * action, lo, hi)
+        self.data.ctrl[:] = np.clip(self.data.ctrl + self.step_size * action, lo, hi)
         mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
         fell = any(self.body_position(n)[2] < TABLE_TOP - 0.05 for n in self.objects)
         return self._observation(), 0.0, bool(fell), False, {}
