@@ -56,7 +56,8 @@ def _own_scene(d: dict) -> str:
     labeler = ", ".join(f"{rel.replace('_', ' ')} {f1:.2f}" for rel, f1 in d["labeler_f1"].items())
     rewards = "; ".join(f"{v['zsrm']:.2f} / {v['base']:.2f}" for v in d["reward_f1"].values())
     ppo = d.get("ppo")
-    learned = (f"; PPO zsrm / oracle {ppo['zsrm']['mean']:.1f} / {ppo['oracle']['mean']:.1f}" if ppo
+    learned = (f"; PPO zsrm / oracle / random {ppo['zsrm']['mean']:.1f} / {ppo['oracle']['mean']:.1f} / "
+               f"{ppo['random']['mean']:.1f} (the oracle learns little: docs/own-scene.md)" if ppo
                else "; PPO not run (the oracle does not learn its goals yet)")
     return f"labeler {labeler}; reward {rewards}{learned}"
 
@@ -142,8 +143,8 @@ FIGURES = [
            "place_between place_front place_behind place_inside --distractor-tasks stack "
            "--out results/reward_eval.json"),
     Figure("Full model on an own scene (examples/own_scene): labeler F1 for the goals' relations; binarised reward "
-           "F1 on two goals, zsrm / base", "own_scene.json", _own_scene,
-           "python benchmarks/own_scene.py --until eval-reward"),
+           "F1 on three goals, zsrm / base; PPO on 'a red cylinder behind a purple cylinder', 300k steps, 3 seeds",
+           "own_scene.json", _own_scene, "python benchmarks/own_scene.py"),
     Figure("Learning from pixels, default configuration, final oracle episode reward", "rl/learning.json",
            _learning, LEARNING + " --out results/rl/learning.json"),
     Figure("Table 2 over four distillation seeds", "multitask/table2_centred_seeds.json", _table2_seeds,
@@ -216,6 +217,8 @@ SIDE = [
      "never on the third block"),
     ("side/multitask/choice/base_probe.json", "which block each distilled policy stacks on in choice scenes: only the "
      "grounded one finds its base by colour"),
+    ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
+     "example scene (probes/own_scene_starts.py): why its goals train in compact scenes with 1 cm steps"),
 ]
 
 # Files beside the figures: plots and tables of them, the models and runs they come from.
@@ -237,8 +240,9 @@ OTHER = [
     ("multitask/choice/trials/*", "their trial summaries"),
     ("own_scene/*", "the own-scene stages' measurements (the labeler, the reward, each stage's seconds), written by "
      "benchmarks/own_scene.py"),
-    ("own_scene/pilots/**", "300k-step oracle runs on the example's goals: PPO does not learn them yet "
-     "(docs/own-scene.md, step 12)"),
+    ("own_scene/pilots/**", "runs on the example's goals in settings that did not learn: every object anywhere "
+     "(300k steps); compact scenes with 2 cm pusher steps (500k) (docs/own-scene.md, step 12)"),
+    ("own_scene/trials/*", "the trial summaries of benchmarks/own_scene.py's PPO sweep (learning.json, .png)"),
     ("rl/**", "learning runs, Figures 4 and 6 trials, the training-speed profile, pilots and reward-hacking "
      "diagnostics (docs/training.md, docs/training-speed.md)"),
 ]
