@@ -217,6 +217,8 @@ SIDE = [
      "never on the third block"),
     ("side/multitask/choice/base_probe.json", "which block each distilled policy stacks on in choice scenes: only the "
      "grounded one finds its base by colour"),
+    ("side/multitask/placing_300k/**", "the placing task policies (left of, right of) retrained with the fast default "
+     "at 300k steps: summary, weights, trials (issue 38; not yet distilled)"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
      "example scene (probes/own_scene_starts.py): why its goals train in compact scenes with 1 cm steps"),
 ]
