@@ -56,7 +56,7 @@ def _own_scene(d: dict) -> str:
     labeler = ", ".join(f"{rel.replace('_', ' ')} {f1:.2f}" for rel, f1 in d["labeler_f1"].items())
     rewards = "; ".join(f"{v['zsrm']:.2f} / {v['base']:.2f}" for v in d["reward_f1"].values())
     ppo = d.get("ppo")
-    learned = (f"; PPO zsrm / oracle / random {ppo['zsrm']['mean']:.1f} / {ppo['oracle']['mean']:.1f} / "
+    learned = (f"; PPO on \"{ppo['goal']}\", zsrm / oracle / random {ppo['zsrm']['mean']:.1f} / {ppo['oracle']['mean']:.1f} / "
                f"{ppo['random']['mean']:.1f} (the oracle learns little: docs/own-scene.md)" if ppo
                else "; PPO not run (the oracle does not learn its goals yet)")
     return f"labeler {labeler}; reward {rewards}{learned}"
@@ -143,7 +143,7 @@ FIGURES = [
            "place_between place_front place_behind place_inside --distractor-tasks stack "
            "--out results/reward_eval.json"),
     Figure("Full model on an own scene (examples/own_scene): labeler F1 for the goals' relations; binarised reward "
-           "F1 on three goals, zsrm / base; PPO on 'a red cylinder behind a purple cylinder', 300k steps, 3 seeds",
+           "F1 on three goals, zsrm / base; PPO on one goal, 300k steps, 3 seeds",
            "own_scene.json", _own_scene, "python benchmarks/own_scene.py"),
     Figure("Learning from pixels, default configuration, final oracle episode reward", "rl/learning.json",
            _learning, LEARNING + " --out results/rl/learning.json"),
