@@ -29,30 +29,27 @@ class ParseGoal:
 
     def run(self) -> int:
         sentence = " ".join(self.text)
-        if self.scene:
-            return self.run_scene(sentence)
-        task = parse_goal(sentence)
-        reading = {"text": sentence, "relation": task.relation, "objects": list(task.objects), "shape": task.shape,
-                   "canonical": task.text, "scene": task.scene, "camera": RELATIONS[task.relation].camera}
+        reading = self.scene_reading(sentence) if self.scene else self.zsrm_reading(sentence)
         if self.json:
             print(json.dumps(reading))
         else:
-            print(f"relation:  {task.relation}\nobjects:   {', '.join(task.objects)} ({task.shape}s, in order)\n"
-                  f"canonical: {task.text}")
+            kind = f"{reading['shape']}s, in order" if "shape" in reading else "in order"
+            print(f"relation:  {reading['relation']}\nobjects:   {', '.join(reading['objects'])} ({kind})\n"
+                  f"canonical: {reading['canonical']}")
         return 0
 
-    def run_scene(self, sentence: str) -> int:
+    @staticmethod
+    def zsrm_reading(sentence: str) -> dict:
+        task = parse_goal(sentence)
+        return {"text": sentence, "relation": task.relation, "objects": list(task.objects), "shape": task.shape,
+                "canonical": task.text, "scene": task.scene, "camera": RELATIONS[task.relation].camera}
+
+    def scene_reading(self, sentence: str) -> dict:
         from zsrm.rl.goals import scene_goal
 
         goal = scene_goal(sentence, self.scene)
-        reading = {"text": sentence, "relation": goal.relation, "objects": list(goal.objects), "canonical": goal.text,
-                   "scene": self.scene, "camera": RELATIONS[goal.relation].camera}
-        if self.json:
-            print(json.dumps(reading))
-        else:
-            print(f"relation:  {goal.relation}\nobjects:   {', '.join(goal.objects)} (in order)\n"
-                  f"canonical: {goal.text}")
-        return 0
+        return {"text": sentence, "relation": goal.relation, "objects": list(goal.objects), "canonical": goal.text,
+                "scene": self.scene, "camera": RELATIONS[goal.relation].camera}
 
 
 @dataclass
