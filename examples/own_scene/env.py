@@ -104,17 +104,17 @@ class OwnSceneEnv(gym.Env):
             if name not in self.objects:
                 self._place(name, (3.0 + i, 3.0, 0.1))
                 continue
+            radius = RADIUS.get(name, 0.025)
             for _ in range(200):  # anywhere: centres 9 cm apart (the bowl's width); compact: 1 cm between edges
                 xy = rng.uniform(np.negative(half), half)
-                if all(np.linalg.norm(xy - q) > (RADIUS.get(name, 0.025) + r + 0.01 if compact else 0.09)
-                       for q, r in placed):
+                if all(np.linalg.norm(xy - q) > (radius + r + 0.01 if compact else 0.09) for q, r in placed):
                     break
-            placed.append((xy, RADIUS.get(name, 0.025)))
+            placed.append((xy, radius))
             self._place(name, (*xy, REST_Z.get(name, CYLINDER_REST_Z)))
         start = rng.uniform((-0.2, -0.14), (0.2, -0.11))  # the pusher starts along the front edge
         if compact:  # ... or just in front of one of the objects, where nothing is in its way
-            xy, radius = placed[rng.integers(len(placed))]
-            ready = xy + (rng.uniform(-0.01, 0.01), -(radius + PUSHER_RADIUS + 0.015))
+            xy, r_front = placed[rng.integers(len(placed))]
+            ready = xy + (rng.uniform(-0.01, 0.01), -(r_front + PUSHER_RADIUS + 0.015))
             if all(np.linalg.norm(ready - q) >= r + PUSHER_RADIUS + 0.01 for q, r in placed if q is not xy):
                 start = ready
         self.data.qpos[:2] = start
