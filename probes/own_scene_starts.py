@@ -6,19 +6,21 @@ PPO's policy starts as such a Gaussian of unit spread; where a bias toward pushi
 no better than no bias, its gradient has nothing to climb. Writes
 results/side/own_scene/starts.json.
 
-    python probes/own_scene_starts.py --episodes 60
+    python probes/own_scene_starts.py
 """
 import argparse
 import json
 import sys
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # examples/ is not installed
 
 from examples.own_scene.adapter import OwnScene  # noqa: E402
 from zsrm.common.files import write_json  # noqa: E402
+from zsrm.envs.rollout import episode_steps, random_policy  # noqa: E402
 from zsrm.envs.scene_task import SceneTask  # noqa: E402
 from zsrm.rl.goals import scene_goal  # noqa: E402
 
@@ -31,28 +33,24 @@ POLICIES = {"uniform": None, "Gaussian (PPO's start)": 0.0, "forward-biased (y a
             "forward-biased (y around +2)": 2.0}
 
 
-def episode_rewards(env, bias, episodes: int, action_repeat: int) -> list[int]:
-    rng, rewards = np.random.default_rng(0), []
-    for ep in range(episodes):
-        env.reset(seed=ep)
-        total = 0
-        for _ in range(100 // action_repeat):
-            if bias is None:
-                action = rng.uniform(-1, 1, 2)
-            else:
-                action = np.clip(rng.normal((0.0, bias), 1.0), -1, 1)
-            *_, terminated, truncated, info = env.step(action)
-            total += info["oracle_steps"]
-            if terminated or truncated:
-                break
-        rewards.append(total)
-    return rewards
+def policy_maker(bias):
+    """Uniform (None) or PPO's starting Gaussian with its y mean at ``bias``, drawn from the
+    action space's generator, which :func:`episode_steps` seeds with each episode's seed."""
+    if bias is None:
+        return random_policy
+    return lambda env: lambda: np.clip(env.action_space.np_random.normal((0.0, bias), 1.0), -1, 1)
+
+
+def episode_rewards(env, bias, episodes: int) -> list[int]:
+    """Each seeded episode's oracle episode reward: its control steps in the goal relation."""
+    return [sum(info["oracle_steps"] for t, _, info, _ in episode_steps(env, policy_maker(bias), seed=ep) if t)
+            for ep in range(episodes)]
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--goal", default="a red cylinder behind a purple cylinder")
-    parser.add_argument("--episodes", type=int, default=60)
+    parser.add_argument("--episodes", type=int, default=300)
     parser.add_argument("--action-repeat", type=int, default=4)
     parser.add_argument("--out", default="results/side/own_scene/starts.json")
     args = parser.parse_args(argv)
@@ -60,11 +58,11 @@ def main(argv=None):
     table = {}
     for name, kwargs in SETTINGS.items():
         adapter.task_env_kwargs = kwargs
-        env = SceneTask(adapter.make_env((adapter.roles["left"],), 16, goal.objects, task=True), adapter, goal,
-                        args.action_repeat)
+        env = gym.wrappers.TimeLimit(SceneTask(adapter.make_env((adapter.roles["left"],), 16, goal.objects, task=True),
+                                               adapter, goal, args.action_repeat), 100 // args.action_repeat)
         table[name] = {}
         for policy, bias in POLICIES.items():
-            r = np.asarray(episode_rewards(env, bias, args.episodes, args.action_repeat), float)
+            r = np.asarray(episode_rewards(env, bias, args.episodes), float)
             table[name][policy] = {"mean": float(r.mean()), "se": float(r.std(ddof=1) / np.sqrt(len(r))),
                                    "success_episodes": float((r > 0).mean())}
             print(f"{name:34s} {policy:30s} {r.mean():5.1f} +- {table[name][policy]['se']:.1f}", flush=True)
