@@ -67,47 +67,69 @@ results: setup
 	# Does the stack policy trained on the student hover instead of stacking? (results/rl/student_v1/
 	# holds the same diagnostics of the earlier student, which did, and is kept for the record)
 	$(PY) probes/reward_hacking.py runs/rl-v1/stack-zsrm-0/policy --episodes 20 --out results/rl/reward_hacking_stack.json
-	# Table 2 (hours on 2 cores: 18 PPO runs of 200k steps, then rollouts, distillation, 36 x 50 x 2 episodes)
-	$(VENV)/bin/zsrm multitask-policies --config v1 --steps 200000 --out results/multitask/policies.json
+	# Table 2 (2 cores: 18 PPO runs of 300k steps, 5 min each on one core; rollouts, 1 min; distillation and
+	# 36 tasks x 50 seeds x 2 spreads a policy)
+	$(VENV)/bin/zsrm multitask-policies --steps 300000 --out results/multitask/policies.json
 	$(VENV)/bin/zsrm multitask-rollouts --episodes 50 --out data/multitask/rollouts
-	# (the cpu schedule's language policy reads its goal embeddings centred on the training goals')
-	$(VENV)/bin/zsrm distill --schedule cpu --policies language primitive none grounded \
+	# the paper's three, plain behaviour cloning: grey frames (the cpu schedule's) and colour frames (the paper's)
+	$(VENV)/bin/zsrm distill --schedule cpu --policies language primitive none --threads 1 \
 		--data data/multitask/rollouts --out runs/multitask/distill
-	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill --data data/multitask/rollouts --seeds 50 \
-		--out results/table2.json
+	$(VENV)/bin/zsrm distill --schedule cpu --image-view colour --policies language primitive none --threads 1 \
+		--data data/multitask/rollouts --out runs/multitask/distill-colour
+	# zsrm's: the grounded policy, behaviour cloning and then DAgger-style relabelling
+	$(VENV)/bin/zsrm distill --schedule cpu --policies grounded --dagger-rounds 3 --threads 1 \
+		--data data/multitask/rollouts --out runs/multitask/distill-dagger
+	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill runs/multitask/distill-dagger \
+		--data data/multitask/rollouts --seeds 50 --out results/table2.json
+	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill-colour --data data/multitask/rollouts \
+		--seeds 50 --out results/multitask/table2_colour.json
+	# the stacking goals in choice scenes (a third block: colour decides the base), the table's best policy
+	OMP_NUM_THREADS=1 $(PY) benchmarks/choice_scenes.py --policies runs/multitask/distill runs/multitask/distill-dagger \
+		--names none language grounded grounded_dagger --best table --out results/multitask/choice_scenes.json
+	# Table 2 as measured before 2026-12-05 (results/side/multitask/v1/): the v1 task policies (200k steps,
+	# action repeat 2), distillation seeds 0-3, choice scenes
+	$(VENV)/bin/zsrm multitask-policies --config v1 --steps 200000 --root runs/multitask/policies-v1 \
+		--out results/side/multitask/v1/policies.json
+	$(VENV)/bin/zsrm multitask-rollouts --policies results/side/multitask/v1/task_policies --episodes 50 \
+		--out data/multitask/rollouts-v1
+	$(VENV)/bin/zsrm distill --schedule cpu --policies language primitive none grounded \
+		--data data/multitask/rollouts-v1 --out runs/multitask/distill-v1
+	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill-v1 --data data/multitask/rollouts-v1 --seeds 50 \
+		--out results/side/multitask/v1/table2.json
 	# distillation seeds 1-3: the paper's three with raw goal embeddings (the committed seed-3 table has no
 	# none: it did not fit in that session), and the centred language policy against each seed's primitive and none
 	for seed in 1 2 3; do \
 		$(VENV)/bin/zsrm distill --schedule cpu --policies language primitive none --no-centre-text --seed $$seed \
-			--out runs/multitask/distill-view-grey-seed$$seed && \
+			--data data/multitask/rollouts-v1 --out runs/multitask/distill-view-grey-seed$$seed && \
 		$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill-view-grey-seed$$seed --seeds 50 \
-			--out results/multitask/table2_seed$$seed.json && \
+			--data data/multitask/rollouts-v1 --out results/side/multitask/v1/table2_seed$$seed.json && \
 		$(VENV)/bin/zsrm distill --schedule cpu --policies language --seed $$seed \
-			--out runs/multitask/distill-centred-seed$$seed && \
+			--data data/multitask/rollouts-v1 --out runs/multitask/distill-centred-seed$$seed && \
 		$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill-centred-seed$$seed --seeds 50 \
-			--out results/multitask/table2_centred_seed$$seed.json || exit 1; \
+			--data data/multitask/rollouts-v1 --out results/side/multitask/v1/table2_centred_seed$$seed.json || exit 1; \
 	done
-	$(PY) benchmarks/table2_seeds.py results/table2.json results/multitask/table2_seed1.json \
-		results/multitask/table2_seed2.json results/multitask/table2_seed3.json \
-		--language results/table2.json results/multitask/table2_centred_seed1.json \
-		results/multitask/table2_centred_seed2.json results/multitask/table2_centred_seed3.json \
-		--out results/multitask/table2_centred_seeds.json
+	$(PY) benchmarks/table2_seeds.py results/side/multitask/v1/table2.json results/side/multitask/v1/table2_seed1.json \
+		results/side/multitask/v1/table2_seed2.json results/side/multitask/v1/table2_seed3.json \
+		--language results/side/multitask/v1/table2.json results/side/multitask/v1/table2_centred_seed1.json \
+		results/side/multitask/v1/table2_centred_seed2.json results/side/multitask/v1/table2_centred_seed3.json \
+		--out results/side/multitask/v1/table2_centred_seeds.json
 	# does the centred language policy follow the goal's colours or its relation? (stacking scenes)
-	$(PY) probes/distill_goal_probe.py --policies runs/multitask/distill --out results/side/multitask/goal_probe_centred_seed0.json
+	$(PY) probes/distill_goal_probe.py --policies runs/multitask/distill-v1 --out results/side/multitask/goal_probe_centred_seed0.json
 	$(PY) probes/distill_goal_probe.py --policies runs/multitask/distill-centred-seed2 \
 		--out results/side/multitask/goal_probe_centred_seed2.json
 	# Table 2 in choice scenes: the stacking tasks' scenes get a third block beside the moved one
-	# (the base must be found by colour); their policies train 100k more steps there from the ones above
+	# (the base must be found by colour); their policies train 100k more steps there from the v1 ones
 	$(VENV)/bin/zsrm multitask-policies --config v1 --choice --steps 100000 --root runs/multitask/policies-choice \
-		--out results/multitask/choice/policies.json
-	OMP_NUM_THREADS=1 $(PY) probes/task_policy_distractor.py --choice-policies results/multitask/choice/task_policies \
+		--init-root results/side/multitask/v1/task_policies --out results/side/multitask/v1/choice/policies.json
+	OMP_NUM_THREADS=1 $(PY) probes/task_policy_distractor.py --policies results/side/multitask/v1/task_policies \
+		--choice-policies results/side/multitask/v1/choice/task_policies \
 		--out results/side/multitask/choice/task_policy_distractor.json
-	$(VENV)/bin/zsrm multitask-rollouts --choice-policies results/multitask/choice/task_policies --episodes 50 \
-		--out data/multitask/rollouts-choice
+	$(VENV)/bin/zsrm multitask-rollouts --policies results/side/multitask/v1/task_policies \
+		--choice-policies results/side/multitask/v1/choice/task_policies --episodes 50 --out data/multitask/rollouts-choice
 	$(VENV)/bin/zsrm distill --schedule cpu --policies language primitive none --no-centre-text --threads 1 \
 		--data data/multitask/rollouts-choice --out runs/multitask/distill-choice
 	$(VENV)/bin/zsrm eval-multitask --threads 1 --policies runs/multitask/distill-choice \
-		--data data/multitask/rollouts-choice --seeds 50 --out results/multitask/table2_choice.json
+		--data data/multitask/rollouts-choice --seeds 50 --out results/side/multitask/v1/table2_choice.json
 	# results/README.md and README.md's headline table, from the files above
 	$(VENV)/bin/zsrm results-page
 

@@ -16,7 +16,7 @@ from zsrm.rl.envs import make_vec
 from zsrm.rl.sweep import trial_grid
 from zsrm.tasks.catalogue import TEST_COLOUR, TRAIN_COLOURS, TRAIN_TASKS, choice_colour
 
-from test_distill import blue_pixels, run_probe
+from test_distill import blue_pixels, run_benchmark, run_probe
 
 TINY = dict(steps=128, n_envs=2, n_steps=32, action_repeat=2, batch_size=32, n_epochs=1, eval_episodes=2, eval_every=128,
             checkpoint_every=128, keypoints=4)
@@ -124,10 +124,15 @@ def test_choice_rollouts_and_table2_use_choice_scenes_for_the_stacking_tasks(tmp
     cached = json.loads((tmp_path / "distill" / "eval" / "language-seen-train.json").read_text())
     assert cached["key"]["choice"] is True
     probe = tmp_path / "probe.json"
-    run_probe("choice_base_probe.py", monkeypatch, "--policies", str(tmp_path / "distill"), "--tasks", "1",
-                  "--seeds", "2", "--out", str(probe))
-    cell = json.loads(probe.read_text())["language"]["test"]
+    run_benchmark("choice_scenes.py", monkeypatch, "--policies", str(tmp_path / "distill"), "--tasks", "1",
+                  "--seeds", "2", "--best", "language", "--out", str(probe))
+    result = json.loads(probe.read_text())
+    cell = result["language"]["test"]
     assert cell["on_base"]["episodes"] == 2 and 0 <= cell["on_base"]["mean"] + cell["on_third"]["mean"] <= 100
+    # What issue 38 asks of the best policy on the blue goals (no unconditioned policy here to compare with).
+    checks, test = result["checks"], cell["on_base"]["mean"]
+    assert checks["policy"] == "language" and "gap_to_none" not in checks
+    assert checks["third_over_base"] == (cell["on_third"]["mean"] / test if test else None)
     # The distractor probe scores the choice policy in its own scenes beside the two-block ones.
     out = tmp_path / "distractor.json"
     run_probe("task_policy_distractor.py", monkeypatch, "--policies", str(two_block), "--choice-policies",

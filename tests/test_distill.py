@@ -629,8 +629,11 @@ def test_dagger_relabels_the_students_frames_with_the_task_policies_actions(pipe
         "dagger/language/round_1"
     assert summary["policies"]["language"]["behaviour_cloning"]["folder"] == "language"
     after = load_policy(round_1)
-    assert all(torch.equal(a, b) for a, b in zip(policies["language"].state_dict().values(),
+    assert all(torch.equal(a, b) for a, b in zip(policies["language_dagger"].state_dict().values(),
                                                  after.state_dict().values()))
+    # Beside it, its behaviour cloning: the paper's method, as a table shows them both.
+    assert all(torch.equal(a, b) for a, b in zip(policies["language"].state_dict().values(),
+                                                 student.state_dict().values()))
     assert not all(torch.equal(a, b) for a, b in zip(student.state_dict().values(), after.state_dict().values()))
     # A second run finds the round finished and leaves it as it is.
     mtime = (round_1 / "model.safetensors").stat().st_mtime_ns
@@ -638,12 +641,40 @@ def test_dagger_relabels_the_students_frames_with_the_task_policies_actions(pipe
     assert (round_1 / "model.safetensors").stat().st_mtime_ns == mtime
     assert EvalMultitask(policies=str(out), data=str(pipeline / "rollouts"), seeds=1, tasks=1, threads=1,
                          out=str(tmp_path / "table2.json")).run() == 0
-    assert json.loads((tmp_path / "table2.json").read_text())["distillation"] == "dagger"
-    assert "DAgger-style relabelling" in (tmp_path / "table2.md").read_text()
+    table = json.loads((tmp_path / "table2.json").read_text())
+    assert {"language", "language_dagger"} <= set(table) and table["dagger"]["rounds"] == 1
+    md = (tmp_path / "table2.md").read_text()
+    assert "DAgger-style relabelling" in md and "| Language Cond. + DAgger (zsrm) |" in md
+    # zsrm's own policy is the table's best; its test score over the ceiling of each relation it was scored on.
+    best = table["best"]
+    assert best["policy"] == "language_dagger" and set(best["test_over_ceiling"]) == {"on_top_of"}
+    cell, top = table["language_dagger"]["unseen"]["test"], table["oracle_task_policies"]["relations"]["on_top_of"]
+    assert best["test_over_ceiling"]["on_top_of"]["unseen"] == (pytest.approx(cell["mean"] / top["mean"])
+                                                                 if top["mean"] else None)
+    # One table of several runs: a policy name twice is refused.
+    with pytest.raises(ValueError, match="named as one of an earlier folder's"):
+        EvalMultitask(policies=(str(pipeline / "distill"), str(out)), data=str(pipeline / "rollouts"), seeds=1,
+                      tasks=1, threads=1, out=str(tmp_path / "both.json")).run()
     # Without its task policies DAgger has no labels: one line naming the folder.
     with pytest.raises(FileNotFoundError, match="no task policy in .*nowhere"):
         Distill(epochs=1, threads=1, policies=("language",), dagger_rounds=1, teachers=str(tmp_path / "nowhere"),
                 data=str(pipeline / "rollouts"), out=str(out)).run()
+
+
+def test_the_best_policy_is_zsrms_own_chosen_on_the_training_tasks():
+    import zsrm.evaluation.multitask as M
+
+    def policy(train, test):
+        cell = lambda mean: {"mean": mean, "se": 1.0, "episodes": 2, "relations": {"left_of": {"mean": mean}}}
+        return {s: {"train": cell(train), "test": cell(test)} for s in M.SPREADS}
+
+    table = {"language": policy(90.0, 90.0), "grounded": policy(30.0, 40.0), "grounded_dagger": policy(35.0, 20.0),
+             "oracle_task_policies": {"mean": 50.0, "relations": {"left_of": {"mean": 40.0}}}}
+    # The paper's policies are not zsrm's; the test tasks do not choose.
+    best = M.best_policy(table)
+    assert best["policy"] == "grounded_dagger" and best["test_over_ceiling"] == {"left_of": {"seen": 0.5,
+                                                                                             "unseen": 0.5}}
+    assert M.best_policy({k: table[k] for k in ("language", "oracle_task_policies")}) is None
 
 
 def test_docstring_examples():

@@ -163,49 +163,64 @@ def language_text(policies: dict) -> dict:
 class EvalMultitask:
     """Table 2: the distilled policies on the training and test tasks, seen and unseen start spread."""
 
-    policies: str = DISTILLED  # the folder zsrm distill wrote
+    policies: tuple[str, ...] = (DISTILLED,)  # the folders zsrm distill wrote (one table; a name once)
     data: str = ROLLOUTS  # the rollouts distilled from (the task policies' own oracle reward)
     seeds: int = 50  # seeded episodes per task
     tasks: int | None = None  # only the first N training and N test tasks (default: all 18 and 18)
     out: str = "results/table2.json"  # the table; .md and .png beside it
     threads: int = 2  # torch threads
     text_span: bool = False  # the language policy reads each goal's embedding projected onto the training goals' span
+    choice: bool = False  # the stacking goals in choice scenes (as they are when the rollouts' were)
     fresh: bool = False  # score every cell again instead of reusing those saved under POLICIES/eval/
+
+    def __post_init__(self):
+        if isinstance(self.policies, (str, Path)):  # one folder
+            self.policies = (str(self.policies),)
 
     def run(self) -> int:
         import shutil
 
         import torch
 
-        from zsrm.evaluation.multitask import ceiling, evaluate_policies, primitive_mapping, split_goals, write_table
+        from zsrm.evaluation.multitask import (best_policy, ceiling, evaluate_policies, primitive_mapping,
+                                               split_goals, write_table)
         from zsrm.policy.rollouts import RolloutData
-        from zsrm.policy.training import load_distilled
+        from zsrm.policy.training import load_distilled_runs
         from zsrm.vlm import load_vlm
 
         check_writable(self.out)
         torch.set_num_threads(self.threads)
-        summary, policies = load_distilled(self.policies)
+        runs = load_distilled_runs(self.policies)
+        summaries, policies = [s for s, _ in runs], {n: p for _, ps in runs for n, p in ps.items()}
+        summary = summaries[0]
+        if len({s["vlm"] for s in summaries}) > 1:
+            raise ValueError(f"the --policies folders read different VLMs ({sorted({s['vlm'] for s in summaries})})")
         if self.text_span:
             if "language" not in policies:
                 raise ValueError(f"--text-span is the language policy's; {self.policies} has none")
             policies["language"].cfg.text_span = True
         data, vlm = RolloutData(self.data), load_vlm(summary["vlm"])
         splits = split_goals(self.tasks)
-        cache = Path(self.policies) / "eval"
-        if self.fresh:
-            shutil.rmtree(cache, ignore_errors=True)
-        choice = bool(data.choice_goals)  # scored in the scenes the stacking tasks were rolled out in
-        table = evaluate_policies(policies, vlm, splits, self.seeds, cache=cache, choice=choice)
+        # In the scenes the stacking tasks were rolled out in, or choice scenes when asked.
+        choice = self.choice or bool(data.choice_goals)
+        table: dict = {}
+        for folder, (_, run) in zip(self.policies, runs):
+            cache = Path(folder) / "eval"
+            if self.fresh:
+                shutil.rmtree(cache, ignore_errors=True)
+            table.update(evaluate_policies(run, vlm, splits, self.seeds, cache=cache, choice=choice))
         # What the paper's policies read, from the policies themselves (one distill run: one view).
-        views = {p.cfg.keypoint_view for name, p in policies.items() if name != "grounded"}
+        views = {p.cfg.keypoint_view for p in policies.values() if p.cfg.conditioning != "grounded"}
+        dagger = next((s["dagger"] for s in summaries if s.get("distillation") == "dagger"), None)
         table.update(schedule=summary["schedule"], tower=summary["tower"], **({"scenes": "choice"} if choice else {}),
                      **({"image_view": ", ".join(sorted(views))} if views else {}),
-                     **language_text(policies),
-                     **({"distillation": "dagger", "dagger": summary["dagger"]}
-                        if summary.get("distillation") == "dagger" else {}),
+                     **language_text(policies), **({"dagger": dagger} if dagger else {}),
                      oracle_task_policies=ceiling(data),
                      meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
                                     if "primitive" in policies else None))
+        best = best_policy(table)
+        if best:
+            table["best"] = best
         for path in write_table(table, self.out):
             print(f"wrote {path}")
         return 0
@@ -219,7 +234,8 @@ class EvalMultitask:
                 "primitive_mapping_test": mapping,
                 "metric": "oracle episode reward: control steps of 100 in the goal relation; mean and s.e. over "
                           "all episodes of the split (seeds x tasks), and over its tasks of each relation (relations)",
-                "command": f"zsrm eval-multitask --policies {self.policies} --data {self.data} --seeds {self.seeds}"
+                "command": f"zsrm eval-multitask --policies {' '.join(self.policies)} --data {self.data} --seeds {self.seeds}"
                            + (f" --tasks {self.tasks}" if self.tasks else "")
-                           + (" --text-span" if self.text_span else "") + f" --out {self.out}",
+                           + (" --text-span" if self.text_span else "") + (" --choice" if self.choice else "")
+                           + f" --out {self.out}",
                 "machine": f"{platform.machine()}, {os.cpu_count()} cores"}

@@ -76,22 +76,26 @@ def _learning(d: dict) -> str:
 
 def _table2(d: dict) -> str:
     policies = ("language", "primitive", "none")
-    return "; ".join(f"{spread} {_slash((d[p][spread]['test']['mean'] for p in policies), '{:.1f}')}"
-                     for spread in ("seen", "unseen")) + " (language / primitive / none)"
+    paper = "; ".join(f"{spread} {_slash((d[p][spread]['test']['mean'] for p in policies), '{:.1f}')}"
+                      for spread in ("seen", "unseen")) + " (language / primitive / none)"
+    best = d["best"]
+    ratios = ", ".join(f"{r.replace('_', ' ')} {_slash(v[s] for s in ('seen', 'unseen'))}"
+                       for r, v in best["test_over_ceiling"].items())
+    return f"{paper}; zsrm's best ({best['policy']}), test / ceiling, seen / unseen: {ratios}"
 
 
-def _table2_seeds(d: dict) -> str:
-    gaps = d["test_gaps"]["language-primitive"]
-    return (f"language above primitive by more than two s.e. in {gaps['seen']['holds_in']} seeds (seen), "
-            f"{gaps['unseen']['holds_in']} (unseen); mean gap +{gaps['seen']['mean']:.1f} / "
-            f"+{gaps['unseen']['mean']:.1f}")
+def _colour(d: dict) -> str:
+    cells = (("seen", "train"), ("seen", "test"), ("unseen", "test"))
+    return "; ".join(f"{p} {_slash((d[p][s][split]['mean'] for s, split in cells), '{:.1f}')}"
+                     for p in ("language", "primitive", "none")) + " (seen train / seen test / unseen test)"
 
 
 def _choice(d: dict) -> str:
-    return (f"grounded {_slash((d['grounded'][s]['test']['mean'] for s in ('seen', 'unseen')), '{:.1f}')}, "
-            f"language {_slash((d['language'][s]['test']['mean'] for s in ('seen', 'unseen')), '{:.1f}')}, "
-            f"primitive {_slash((d['primitive'][s]['test']['mean'] for s in ('seen', 'unseen')), '{:.1f}')} "
-            "(test tasks, seen / unseen)")
+    c = d["checks"]
+    best = d[c["policy"]]["test"]
+    return (f"{c['policy']} on base {best['on_base']['mean']:.1f}, test / train {c['test_over_train']:.2f}, "
+            f"above none by {c['gap_to_none']:.1f} (two s.e. added {c['two_se_added']:.1f}), on the third block "
+            f"{c['third_over_base']:.2f} of its steps on the base")
 
 
 def _reward_f1(d: dict) -> str:
@@ -126,8 +130,9 @@ FIGURES = [
     Figure("Figure 5: base reward along a scripted push", "figure5.csv", _figure5,
            "zsrm reward-curve --out results/figure5"),
     Figure("Figure 6: final oracle episode reward", "rl/summary.json", _figure6, FIGURE6),
-    Figure("Table 2: distilled policies on the blue test tasks", "table2.json", _table2,
-           "zsrm eval-multitask --seeds 50 --out results/table2.json"),
+    Figure("Table 2: distilled policies on the blue test tasks (grey frames)", "table2.json", _table2,
+           "zsrm eval-multitask --policies runs/multitask/distill runs/multitask/distill-dagger --seeds 50 "
+           "--out results/table2.json"),
     # zsrm's own claims
     Figure("Scripted controllers reach every goal (success)", "scripted_success.json", _scripted,
            "zsrm scripted-eval --episodes 20 --out results/scripted_success.json"),
@@ -147,14 +152,14 @@ FIGURES = [
            "own_scene.json", _own_scene, "python benchmarks/own_scene.py"),
     Figure("Learning from pixels, default configuration, final oracle episode reward", "rl/learning.json",
            _learning, LEARNING + " --out results/rl/learning.json"),
-    Figure("Table 2 over four distillation seeds", "multitask/table2_centred_seeds.json", _table2_seeds,
-           "python benchmarks/table2_seeds.py results/table2.json results/multitask/table2_seed1.json "
-           "results/multitask/table2_seed2.json results/multitask/table2_seed3.json --language results/table2.json "
-           "results/multitask/table2_centred_seed1.json results/multitask/table2_centred_seed2.json "
-           "results/multitask/table2_centred_seed3.json --out results/multitask/table2_centred_seeds.json"),
-    Figure("Table 2 in choice scenes: the base found by colour", "multitask/table2_choice.json", _choice,
-           "zsrm eval-multitask --policies runs/multitask/distill-choice --data data/multitask/rollouts-choice "
-           "--seeds 50 --out results/multitask/table2_choice.json"),
+    Figure("Table 2 in colour frames (the paper's setting): the paper's three, behaviour cloning",
+           "multitask/table2_colour.json", _colour,
+           "zsrm eval-multitask --policies runs/multitask/distill-colour --seeds 50 "
+           "--out results/multitask/table2_colour.json"),
+    Figure("Choice scenes (a third block; colour decides the base): zsrm's best on the blue stacking goals",
+           "multitask/choice_scenes.json", _choice,
+           "python benchmarks/choice_scenes.py --policies runs/multitask/distill runs/multitask/distill-dagger "
+           "--names none language grounded grounded_dagger --best table --out results/multitask/choice_scenes.json"),
     Figure("`make demo`: zsrm-trained policy / random on place_right", "demo.json",
            lambda d: f"{_pm(d, 'zsrm_policy_mean', 'zsrm_policy_se')} / "
                      f"{_pm(d, 'random_policy_mean', 'random_policy_se')}",
@@ -217,8 +222,8 @@ SIDE = [
      "never on the third block"),
     ("side/multitask/choice/base_probe.json", "which block each distilled policy stacks on in choice scenes: only the "
      "grounded one finds its base by colour"),
-    ("side/multitask/placing_300k/**", "the placing task policies (left of, right of) retrained with the fast default "
-     "at 300k steps: summary, weights, trials (issue 38; not yet distilled)"),
+    ("side/multitask/v1/**", "Table 2 as measured before 2026-12-05, from the v1 task policies (200k steps, action "
+     "repeat 2; placing at 1 to 49): the table, distillation seeds 1-3, choice scenes and their task policies"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
      "example scene (probes/own_scene_starts.py): why its goals train in compact scenes with 1 cm steps"),
 ]
@@ -231,15 +236,10 @@ OTHER = [
     ("vlm_presence.png", "the scene VLM's presence ROC curves"),
     ("table2.*", "Table 2 as CSV, markdown and a bar plot"),
     ("reward_curves/*", "base and zsrm reward along scripted episodes of each task (written with reward_eval.json)"),
-    ("multitask/policies.*", "the 18 zsrm-trained task policies' training summary (the ceiling of Table 2)"),
+    ("multitask/policies.*", "the 18 zsrm-trained task policies' training summary (300k steps each)"),
     ("multitask/task_policies/**", "the 18 task policies themselves, read by `zsrm multitask-rollouts`"),
     ("multitask/trials/*", "their trial summaries, so a rerun of the sweep skips them"),
-    ("multitask/table2_seed[123].*", "Table 2 with distillation seeds 1-3 (raw goal embeddings; primitive and none)"),
-    ("multitask/table2_centred_seed[123].*", "the centred language policy with distillation seeds 1-3"),
-    ("multitask/table2_choice.*", "Table 2 in choice scenes as CSV, markdown and a bar plot"),
-    ("multitask/choice/policies.*", "the six choice-scene stacking task policies' training summary"),
-    ("multitask/choice/task_policies/**", "those policies, read by `zsrm multitask-rollouts --choice-policies`"),
-    ("multitask/choice/trials/*", "their trial summaries"),
+    ("multitask/table2_colour.*", "Table 2 in colour frames as CSV, markdown and a bar plot"),
     ("own_scene/*", "the own-scene stages' measurements (the labeler, the reward, each stage's seconds), written by "
      "benchmarks/own_scene.py"),
     ("own_scene/pilots/**", "runs on the example's goals in settings that did not learn: every object anywhere "

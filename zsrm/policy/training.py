@@ -292,11 +292,32 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
     return summary
 
 
+DAGGER_SUFFIX = "_dagger"  # a DAgger run's policy in a table, beside its behaviour cloning
+
+
 def load_distilled(out: str | Path) -> tuple[dict, dict[str, DistilledPolicy]]:
-    """``out/distill.json`` and the policies it lists."""
+    """``out/distill.json`` and the policies it lists. A DAgger run's policy is two: ``<name>`` (its
+    behaviour cloning, the paper's method) and ``<name>_dagger`` (its last round, zsrm's)."""
     summary = read_json(Path(out) / "distill.json", "the summary of zsrm distill")
     if not isinstance(summary.get("policies"), dict) or not summary["policies"]:
         raise ValueError(f"{Path(out) / 'distill.json'} lists no policies; rerun zsrm distill")
-    # A DAgger run's policies are its last rounds' folders (zsrm.policy.dagger)
-    return summary, {name: load_policy(Path(out) / (entry.get("folder", name) if isinstance(entry, dict) else name))
-                     for name, entry in summary["policies"].items()}
+    policies = {}
+    for name, entry in summary["policies"].items():
+        entry = entry if isinstance(entry, dict) else {}
+        if "rounds" in entry:  # zsrm.policy.dagger
+            policies[name] = load_policy(Path(out) / entry["behaviour_cloning"].get("folder", name))
+            policies[name + DAGGER_SUFFIX] = load_policy(Path(out) / entry["folder"])
+        else:
+            policies[name] = load_policy(Path(out) / entry.get("folder", name))
+    return summary, policies
+
+
+def load_distilled_runs(outs) -> list[tuple[dict, dict[str, DistilledPolicy]]]:
+    """Several ``zsrm distill`` runs as one table's (:func:`load_distilled` of each), no policy name twice."""
+    runs, names = [load_distilled(out) for out in outs], set()
+    for out, (_, policies) in zip(outs, runs):
+        if names & set(policies):
+            raise ValueError(f"{out} has a policy named as one of an earlier folder's ({sorted(names & set(policies))}"
+                             "); give a table one run per policy")
+        names |= set(policies)
+    return runs
