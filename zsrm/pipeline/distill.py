@@ -170,7 +170,6 @@ class EvalMultitask:
     out: str = "results/table2.json"  # the table; .md and .png beside it
     threads: int = 2  # torch threads
     text_span: bool = False  # the language policy reads each goal's embedding projected onto the training goals' span
-    choice: bool = False  # the stacking goals in choice scenes (as they are when the rollouts' were)
     fresh: bool = False  # score every cell again instead of reusing those saved under POLICIES/eval/
 
     def __post_init__(self):
@@ -201,8 +200,7 @@ class EvalMultitask:
             policies["language"].cfg.text_span = True
         data, vlm = RolloutData(self.data), load_vlm(summary["vlm"])
         splits = split_goals(self.tasks)
-        # In the scenes the stacking tasks were rolled out in, or choice scenes when asked.
-        choice = self.choice or bool(data.choice_goals)
+        choice = bool(data.choice_goals)  # scored in the scenes the stacking tasks were rolled out in
         table: dict = {}
         for folder, (_, run) in zip(self.policies, runs):
             cache = Path(folder) / "eval"
@@ -236,6 +234,6 @@ class EvalMultitask:
                           "all episodes of the split (seeds x tasks), and over its tasks of each relation (relations)",
                 "command": f"zsrm eval-multitask --policies {' '.join(self.policies)} --data {self.data} --seeds {self.seeds}"
                            + (f" --tasks {self.tasks}" if self.tasks else "")
-                           + (" --text-span" if self.text_span else "") + (" --choice" if self.choice else "")
+                           + (" --text-span" if self.text_span else "")
                            + f" --out {self.out}",
                 "machine": f"{platform.machine()}, {os.cpu_count()} cores"}

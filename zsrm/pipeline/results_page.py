@@ -222,6 +222,9 @@ SIDE = [
      "never on the third block"),
     ("side/multitask/choice/base_probe.json", "which block each distilled policy stacks on in choice scenes: only the "
      "grounded one finds its base by colour"),
+    ("side/multitask/grounded_none_dagger/*", "the grounded policy seeing only its grounding (`--keypoint-view none`), "
+     "3 DAgger rounds: the student stacks at 92.5 to 92.7 on the training tasks and places at 0 to 9.9 (`distill.json` "
+     "and each round's record of `zsrm distill --policies grounded --dagger-rounds 3 --out runs/multitask/distill-dagger-none`)"),
     ("side/multitask/v1/**", "Table 2 as measured before 2026-12-05, from the v1 task policies (200k steps, action "
      "repeat 2; placing at 1 to 49): the table, distillation seeds 1-3, choice scenes and their task policies"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
