@@ -77,7 +77,7 @@ results: setup
 	$(VENV)/bin/zsrm distill --schedule cpu --image-view colour --policies language primitive none --threads 1 \
 		--data data/multitask/rollouts --out runs/multitask/distill-colour
 	# zsrm's: the grounded policy, behaviour cloning and then DAgger-style relabelling
-	$(VENV)/bin/zsrm distill --schedule cpu --policies grounded --dagger-rounds 3 --threads 1 \
+	$(VENV)/bin/zsrm distill --schedule cpu --policies grounded --keypoint-view shape --dagger-rounds 6 --threads 1 \
 		--data data/multitask/rollouts --out runs/multitask/distill-dagger
 	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill runs/multitask/distill-dagger \
 		--data data/multitask/rollouts --seeds 50 --out results/table2.json

@@ -51,6 +51,7 @@ def checks(out: dict, best: str) -> dict:
     test, train = out[best]["test"]["on_base"], out[best]["train"]["on_base"]
     none = out["none"]["test"]["on_base"] if "none" in out else None
     return {"policy": best, "test_over_train": test["mean"] / train["mean"] if train["mean"] else None,
+            # the gap's bar: twice the two standard errors added (added, not root-sum-squared: the wider)
             **({"gap_to_none": test["mean"] - none["mean"], "two_se_added": 2 * (test["se"] + none["se"])}
                if none else {}),
             "third_over_base": out[best]["test"]["on_third"]["mean"] / test["mean"] if test["mean"] else None}

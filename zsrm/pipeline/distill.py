@@ -191,7 +191,9 @@ class EvalMultitask:
         torch.set_num_threads(self.threads)
         runs = load_distilled_runs(self.policies)
         summaries, policies = [s for s, _ in runs], {n: p for _, ps in runs for n, p in ps.items()}
-        summary = summaries[0]
+        # The first run's settings; the grounded policy's view from the run that has one.
+        summary = {**summaries[0], **next(({"keypoint_view": s["keypoint_view"]} for s in summaries
+                                           if "keypoint_view" in s), {})}
         if len({s["vlm"] for s in summaries}) > 1:
             raise ValueError(f"the --policies folders read different VLMs ({sorted({s['vlm'] for s in summaries})})")
         if self.text_span:

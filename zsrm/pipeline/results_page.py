@@ -94,7 +94,7 @@ def _choice(d: dict) -> str:
     c = d["checks"]
     best = d[c["policy"]]["test"]
     return (f"{c['policy']} on base {best['on_base']['mean']:.1f}, test / train {c['test_over_train']:.2f}, "
-            f"above none by {c['gap_to_none']:.1f} (two s.e. added {c['two_se_added']:.1f}), on the third block "
+            f"above none by {c['gap_to_none']:.1f} (twice the two s.e. added: {c['two_se_added']:.1f}), on the third block "
             f"{c['third_over_base']:.2f} of its steps on the base")
 
 
@@ -225,6 +225,8 @@ SIDE = [
     ("side/multitask/grounded_none_dagger/*", "the grounded policy seeing only its grounding (`--keypoint-view none`), "
      "3 DAgger rounds: the student stacks at 92.5 to 92.7 on the training tasks and places at 0 to 9.9 (`distill.json` "
      "and each round's record of `zsrm distill --policies grounded --dagger-rounds 3 --out runs/multitask/distill-dagger-none`)"),
+    ("side/multitask/table2_dagger9.*", "zsrm's grounded policy after nine DAgger rounds instead of six: no better on "
+     "the right of (test 18.2 / 19.7, seen / unseen)"),
     ("side/multitask/v1/**", "Table 2 as measured before 2026-12-05, from the v1 task policies (200k steps, action "
      "repeat 2; placing at 1 to 49): the table, distillation seeds 1-3, choice scenes and their task policies"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
