@@ -3,9 +3,10 @@
 In a choice scene (``zsrm train --choice``) the moved block starts between its base and a third
 block, the base on either side at random: colour decides which block is the base. A policy that
 finds its base (by the goal's colours, or by its primitive code) stacks on it; one that does not
-stacks on either about as often. On the stacking goals of Table 2 (the same seeds and scenes as
-``zsrm eval-multitask --choice``), per policy and split: the control steps of 100 with the moved
-block on its base (the oracle episode reward) and on the third block.
+stacks on either about as often. On the stacking goals of Table 2 (the same seeds as ``zsrm
+eval-multitask``, and the same choice scenes as its table of choice-scene rollouts), per policy
+and split: the control steps of 100 with the moved block on its base (the oracle episode reward)
+and on the third block.
 
 With ``--best`` (a policy's name, or ``table`` for the one a Table 2 file names as zsrm's best),
 ``checks`` holds what issue 38 asks of it on the blue test goals: its test score over its
@@ -22,7 +23,7 @@ import json
 
 from tqdm import tqdm
 
-from zsrm.common.files import write_json
+from zsrm.common.files import read_json, write_json
 from zsrm.envs.tabletop import TabletopEnv
 from zsrm.evaluation.multitask import EVAL_SEED, OnThirdBlock, split_goals, task_episodes, task_seed
 from zsrm.policy.models import embed_goals
@@ -71,7 +72,7 @@ def main() -> None:
     args = parser.parse_args()
     runs = load_distilled_runs(args.policies)
     policies = {n: p for _, run in runs for n, p in run.items() if args.names is None or n in args.names}
-    best = json.load(open(args.table))["best"]["policy"] if args.best == "table" else args.best
+    best = read_json(args.table, "a Table 2 file")["best"]["policy"] if args.best == "table" else args.best
     if best is not None and best not in policies:
         raise SystemExit(f"--best {best}: no such policy in {args.policies} (have {', '.join(policies)})")
     vlm = load_vlm(runs[0][0]["vlm"])

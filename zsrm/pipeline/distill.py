@@ -236,6 +236,5 @@ class EvalMultitask:
                           "all episodes of the split (seeds x tasks), and over its tasks of each relation (relations)",
                 "command": f"zsrm eval-multitask --policies {' '.join(self.policies)} --data {self.data} --seeds {self.seeds}"
                            + (f" --tasks {self.tasks}" if self.tasks else "")
-                           + (" --text-span" if self.text_span else "")
-                           + f" --out {self.out}",
+                           + (" --text-span" if self.text_span else "") + f" --out {self.out}",
                 "machine": f"{platform.machine()}, {os.cpu_count()} cores"}
