@@ -810,3 +810,48 @@ def test_shape_frames_paint_every_block_colour_one_grey_and_keep_the_rest_grey()
     # Same seed, same layout: with the colours swapped the shape frames are the same but for the
     # blocks' own positions.
     assert (shapes[0] != shapes[1]).float().mean() < 0.05
+
+
+def test_mirror_batch_flips_half_the_frames_their_actions_x_and_their_goal():
+    from zsrm.policy.training import mirror_batch
+
+    g = torch.Generator().manual_seed(0)
+    images = torch.randint(0, 256, (64, 3, 4, 5), generator=g, dtype=torch.uint8)
+    actions, codes = torch.rand(64, 3, generator=g) * 2 - 1, torch.randint(0, 3, (64,), generator=g)
+    mirrors = torch.tensor([0, 2, 1])  # a stacking goal (its own mirror), a left of and its right of
+    out_images, out_actions, out_codes = mirror_batch(images, actions, codes, mirrors, g)
+    flipped = torch.tensor([not torch.equal(a, b) for a, b in zip(out_images, images)])
+    assert 10 < int(flipped.sum()) < 54
+    assert torch.equal(out_images[flipped], images[flipped].flip(-1))
+    assert torch.equal(out_actions[flipped, 0], -actions[flipped, 0])
+    assert torch.equal(out_actions[:, 1:], actions[:, 1:]) and torch.equal(out_actions[~flipped], actions[~flipped])
+    assert torch.equal(out_codes, torch.where(flipped, mirrors[codes], codes))
+
+
+def test_distill_mirror_reads_each_placing_task_as_its_mirror_too(pipeline, tmp_path):
+    """--mirror on rollouts of a place-left task and its mirror (and a stacking task, its own)."""
+    from zsrm.policy.training import cloning_data, identity
+
+    left = TRAIN_TASKS[6].text  # the mirror of GOALS[1]
+    assert parse_goal(GOALS[1]).mirrored().text == left and parse_goal(GOALS[0]).mirrored() == parse_goal(GOALS[0])
+    shutil.copytree(pipeline / "policies", tmp_path / "policies")
+    train(TrainConfig(goal=left, reward="zsrm", seed=0, **TINY), policy_folder(tmp_path / "policies", left).parent,
+          progress=False)
+    assert MultitaskRollouts(tasks=(*GOALS, left), policies=str(tmp_path / "policies"), episodes=2, envs=2,
+                             out=str(tmp_path / "rollouts")).run() == 0
+    data = cloning_data(RolloutData(tmp_path / "rollouts"), load_vlm("scene"), ["language"])
+    assert [data.goals[i] for i in data.mirror_codes()] == [GOALS[0], GOALS[1], left]
+    assert "mirror" not in identity(DistillConfig(), "language", data)  # earlier runs' checkpoints still resume
+    assert identity(DistillConfig(mirror=True), "language", data)["mirror"] is True
+    assert Distill(epochs=1, threads=1, policies=("language",), mirror=True, data=str(tmp_path / "rollouts"),
+                   out=str(tmp_path / "distill")).run() == 0
+    summary, policies = load_distilled(tmp_path / "distill")
+    # A table shows it apart from the same policy distilled without mirrored frames.
+    assert summary["mirror"] is True and set(policies) == {"language_mirror"}
+    # Rollouts without a task's mirror are refused before any work, in one line.
+    with pytest.raises(ValueError, match="needs each goal's mirror goal in the rollouts"):
+        Distill(epochs=1, threads=1, policies=("language",), mirror=True, data=str(pipeline / "rollouts"),
+                out=str(tmp_path / "refused")).run()
+    assert not (tmp_path / "refused" / "language").exists()
+    with pytest.raises(ValueError, match="left camera, whose image does not flip"):
+        parse_goal("a red block in front of a green block").mirrored()

@@ -109,3 +109,14 @@ def test_thresholds_scale_to_pixels():
     px = WORLD_THRESHOLDS.scaled(100.0)
     assert px.eps_x == pytest.approx(WORLD_THRESHOLDS.eps_x * 100)
     assert px.close == pytest.approx(WORLD_THRESHOLDS.close * 100)
+
+
+@given(point, point, point, thresholds)
+def test_a_relations_mirror_holds_on_the_coordinates_mirrored_left_to_right(a, b, c, t):
+    """The table's ``mirror`` (what zsrm distill --mirror reads a flipped frame's goal as)."""
+    flip = np.array([-1.0, 1.0])
+    for relation in RELATIONS.values():
+        if relation.mirror is None:
+            continue
+        coords = (a, b, c)[:relation.arity]
+        assert relation(*coords, thresholds=t) == RELATIONS[relation.mirror](*(p * flip for p in coords), thresholds=t)

@@ -176,3 +176,30 @@ def test_push_close_starts_apart_with_the_pusher_clear_behind_the_mover(spread):
         assert np.linalg.norm(mover[:2] - anchor[:2]) > 0.10  # not yet close (Table 1: 10 cm)
         assert np.linalg.norm(pusher[:2] - mover[:2]) >= pushing.PUCK_HALF + 0.02 - 1e-6  # not inside the puck
         assert np.sign(pusher[0] - mover[0]) == np.sign(mover[0] - anchor[0])  # behind it, away from the anchor
+
+
+@pytest.mark.parametrize("task", ["a red block on the left of a green block", "a yellow block on top of a red block"])
+def test_a_scene_mirrored_left_to_right_renders_as_the_front_frame_flipped(task):
+    """What ``zsrm distill --mirror`` relies on: the tabletop and its front camera are symmetric
+    about x = 0, so the flipped frame is the frame of the mirrored scene."""
+    import mujoco
+
+    env = gym.make("zsrm/Tabletop-v0", task=task)
+    obs, _ = env.reset(seed=1)
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        obs, *_ = env.step(rng.uniform(-1, 1, 3).astype(np.float32))
+    base = env.unwrapped
+    model, data = base.model, base.data
+    for j in np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE):
+        adr = model.jnt_qposadr[j]
+        data.qpos[adr] *= -1  # x, and the quaternion's y and z: a reflection through the x = 0 plane
+        data.qpos[adr + 5:adr + 7] *= -1
+    data.mocap_pos[:, 0] *= -1
+    mujoco.mj_forward(model, data)
+    mirrored = base.render_cameras(("front",))["front"].astype(int)
+    frame = obs["front"].astype(int)
+    differs = lambda a, b: (np.abs(a - b).max(-1) > 10).mean()
+    # A few edge pixels of the gripper's rod differ (under 1%); the unflipped frame differs at ~8%.
+    assert differs(mirrored, frame[:, ::-1]) < 0.01 < 0.05 < differs(mirrored, frame)
+    env.close()

@@ -23,7 +23,7 @@ from zsrm.common.files import write_json, write_text
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.policy.models import DistilledPolicy, embed_goals
-from zsrm.policy.training import DAGGER_SUFFIX
+from zsrm.policy.training import DAGGER_SUFFIX, MIRROR_SUFFIX
 from zsrm.rl.config import STACKING, TrainConfig, goal_relation
 from zsrm.rl.envs import make_vec
 from zsrm.rl.evaluate import mean_se_cell
@@ -34,10 +34,13 @@ from zsrm.tasks.relations import RELATIONS, holds_in_world
 
 EVAL_SEED = 3_000_000  # evaluation scenes: seeds apart from the training and collection envs'
 PAPER_POLICIES = {"none": "No Conditioning", "primitive": "Primitive Code Cond.", "language": "Language Cond."}
-# Table order: the paper's three, zsrm's grounded variant, then each distilled with zsrm's DAgger rounds.
+# Table order: the paper's three, zsrm's grounded variant, each distilled with zsrm's DAgger rounds,
+# then each with zsrm's mirrored frames (with and without DAgger).
+_BASES = [*PAPER_POLICIES.items(), ("grounded", "Grounded Language Cond.")]
 POLICY_NAMES = {**PAPER_POLICIES, "grounded": "Grounded Language Cond. (zsrm)",
-                **{f"{n}{DAGGER_SUFFIX}": f"{label.removesuffix(' (zsrm)')} + DAgger (zsrm)"
-                   for n, label in [*PAPER_POLICIES.items(), ("grounded", "Grounded Language Cond.")]}}
+                **{f"{n}{DAGGER_SUFFIX}": f"{label} + DAgger (zsrm)" for n, label in _BASES},
+                **{f"{n}{MIRROR_SUFFIX}{dagger}": f"{label} + mirror{' + DAgger' if dagger else ''} (zsrm)"
+                   for dagger in ("", DAGGER_SUFFIX) for n, label in _BASES}}
 SPREADS = ("seen", "unseen")
 SPLITS = ("train", "test")
 

@@ -26,6 +26,7 @@ from zsrm.common.registry import load_weights
 from zsrm.policy.models import (CONDITIONINGS, IMAGE_VIEWS, KEYPOINT_VIEWS, DistilledPolicy, PolicyConfig,
                                 embed_goals, load_policy, save_policy)
 from zsrm.policy.rollouts import RolloutData, train_task_index
+from zsrm.tasks.language import parse_goal
 
 # cpu reads grey frames: the scene VLM's trunk, pretrained on which colours are present, gives features
 # so colour-bound that, read in colour, none of the paper's three follows a colour it never saw
@@ -60,6 +61,10 @@ class DistillConfig:
     image_view: Literal["colour", "grey", "shape"] | None = None
     """what the paper's three policies' image tower reads (default: the schedule's): the frames in colour
     (as the paper), in grey, or as shapes (grey, every coloured object one grey)"""
+    mirror: bool = False
+    """zsrm's, not the paper's: each frame, with probability 1/2, mirrored left to right (the frame flipped,
+    the action's x negated, "left of" read as "right of"): the scenes and the front camera are
+    mirror-symmetric, so each placing task teaches its mirror task too"""
     batch_size: int = 64
     """frames per step"""
     lr: float = 1e-4
@@ -128,10 +133,33 @@ class CloningData:
     camera: str
     action_repeat: int
 
-    def condition(self, cfg: PolicyConfig, index: torch.Tensor) -> torch.Tensor | None:
+    def condition(self, cfg: PolicyConfig, codes: torch.Tensor) -> torch.Tensor | None:
+        """What a policy of ``cfg`` reads of the goals of ``codes``."""
         if cfg.conditioning in ("language", "grounded"):
-            return self.embeddings[cfg.text_embedding][self.codes[index]]
-        return self.codes[index] if cfg.conditioning == "primitive" else None
+            return self.embeddings[cfg.text_embedding][codes]
+        return codes if cfg.conditioning == "primitive" else None
+
+    def mirror_codes(self) -> torch.Tensor:
+        """Each goal's mirror goal's code (:meth:`~zsrm.tasks.language.Task.mirrored`); a ValueError when
+        the data lacks one, or its camera's image is not the scene's left-right mirror."""
+        if self.camera != "front":
+            raise ValueError(f"--mirror flips front-camera frames; these rollouts are the {self.camera} camera's")
+        texts = [parse_goal(goal).mirrored().text for goal in self.goals]
+        missing = sorted(set(texts) - set(self.goals))
+        if missing:
+            raise ValueError(f"--mirror needs each goal's mirror goal in the rollouts; {missing[0]!r} is not")
+        return torch.tensor([self.goals.index(t) for t in texts])
+
+
+def mirror_batch(images: torch.Tensor, actions: torch.Tensor, codes: torch.Tensor, mirrors: torch.Tensor,
+                 generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Half the frames (at random) mirrored left to right: flipped, their action's x (its first
+    component, in the camera's plane) negated, their goal its mirror goal's (``mirrors[code]``)."""
+    flip = torch.rand(len(codes), generator=generator) < 0.5
+    images, actions = images.clone(), actions.clone()
+    images[flip] = images[flip].flip(-1)
+    actions[flip, 0] = -actions[flip, 0]
+    return images, actions, torch.where(flip, mirrors[codes], codes)
 
 
 def embedding_kind(cfg: DistillConfig, conditioning: str) -> str:
@@ -177,11 +205,15 @@ def run_epoch(policy: DistilledPolicy, opt, data: CloningData, cfg: DistillConfi
     generator = torch.Generator().manual_seed(cfg.seed * 100_003 + epoch)
     n = len(data.actions)
     order, total = torch.randperm(n, generator=generator), 0.0
+    mirrors = data.mirror_codes() if cfg.mirror else None
     policy.train()
     for start in range(0, n, cfg.batch_size):
         index = order[start:start + cfg.batch_size]
-        pred = policy(random_crops(data.images[index], generator), data.condition(policy.cfg, index))
-        loss = F.mse_loss(pred, data.actions[index])
+        images, actions, codes = data.images[index], data.actions[index], data.codes[index]
+        if mirrors is not None:
+            images, actions, codes = mirror_batch(images, actions, codes, mirrors, generator)
+        pred = policy(random_crops(images, generator), data.condition(policy.cfg, codes))
+        loss = F.mse_loss(pred, actions)
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -207,6 +239,8 @@ def identity(cfg: DistillConfig, conditioning: str, data: CloningData) -> dict:
         d.pop("image_view")
     if not centres_text(cfg, conditioning, data.goals):  # as before centre_text existed
         d.pop("centre_text")
+    if not cfg.mirror:  # as before mirror existed
+        d.pop("mirror")
     return json.loads(json.dumps(d))
 
 
@@ -267,6 +301,8 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
     vlm = load_vlm(cfg.vlm)
     rollouts = RolloutData(data_folder)
     data = cloning_data(rollouts, vlm, [embedding_kind(cfg, name) for name in cfg.policies])
+    if cfg.mirror:
+        data.mirror_codes()  # refuse rollouts it cannot mirror before any work
     policies = {name: train_policy(cfg, name, data, vlm, Path(out) / name, progress, fresh)
                 for name in cfg.policies}
     rounds = dagger(cfg, data, vlm, rollouts, Path(out), progress, fresh) if dagger is not None else {}
@@ -274,6 +310,7 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
                "vlm": cfg.vlm, "text_embedding": cfg.text_embedding, "seed": cfg.seed,
                **({"centre_text": True} if "language" in cfg.policies and centres_text(cfg, "language", data.goals) else {}),
                **({"keypoint_view": cfg.keypoint_view} if "grounded" in cfg.policies else {}),
+               **({"mirror": True} if cfg.mirror else {}),
                **({"image_view": cfg.image_view} if set(cfg.policies) - {"grounded"} else {}), "data": str(data_folder),
                "frames": len(data.actions), "goals": data.goals,
                "policies": {name: {"folder": name, "final_loss": t["final_loss"]}
@@ -293,22 +330,24 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
 
 
 DAGGER_SUFFIX = "_dagger"  # a DAgger run's policy in a table, beside its behaviour cloning
+MIRROR_SUFFIX = "_mirror"  # a policy distilled with --mirror, beside one without
 
 
 def load_distilled(out: str | Path) -> tuple[dict, dict[str, DistilledPolicy]]:
     """``out/distill.json`` and the policies it lists. A DAgger run's policy is two: ``<name>`` (its
-    behaviour cloning, the paper's method) and ``<name>_dagger`` (its last round, zsrm's)."""
+    behaviour cloning, the paper's method) and ``<name>_dagger`` (its last round, zsrm's). A run with
+    ``--mirror`` names its policies ``<name>_mirror`` (and ``<name>_mirror_dagger``)."""
     summary = read_json(Path(out) / "distill.json", "the summary of zsrm distill")
     if not isinstance(summary.get("policies"), dict) or not summary["policies"]:
         raise ValueError(f"{Path(out) / 'distill.json'} lists no policies; rerun zsrm distill")
-    policies = {}
+    policies, suffix = {}, MIRROR_SUFFIX if summary.get("mirror") else ""
     for name, entry in summary["policies"].items():
         entry = entry if isinstance(entry, dict) else {}
         if "rounds" in entry:  # zsrm.policy.dagger
-            policies[name] = load_policy(Path(out) / entry["behaviour_cloning"].get("folder", name))
-            policies[name + DAGGER_SUFFIX] = load_policy(Path(out) / entry["folder"])
+            policies[name + suffix] = load_policy(Path(out) / entry["behaviour_cloning"].get("folder", name))
+            policies[name + suffix + DAGGER_SUFFIX] = load_policy(Path(out) / entry["folder"])
         else:
-            policies[name] = load_policy(Path(out) / entry.get("folder", name))
+            policies[name + suffix] = load_policy(Path(out) / entry.get("folder", name))
     return summary, policies
 
 

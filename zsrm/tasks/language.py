@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import difflib
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from zsrm.tasks.lexicon import (ADJECTIVES, COLOURS, CONTAINER_WORDS, CONTAINERS, DETERMINERS, EACH_OTHER, LEAD_WORDS, LINK_FILLERS, NEGATIONS,
                                 OTHER_COLOURS, PLACING_VERBS, POSSESSIVE_LINK, POSSESSIVE_SIDES, POSSESSIVE_TAIL,
@@ -85,6 +85,15 @@ class Task:
     def phrases(self) -> tuple[str, ...]:
         """Noun phrases of the objects, as Grad-CAM reads them ("red block")."""
         return tuple(c if c in CONTAINERS else f"{c} {self.shape}" for c in self.objects)
+
+    def mirrored(self) -> "Task":
+        """The goal of the scene mirrored left to right in its camera ("left of" <-> "right of");
+        a ValueError for a relation whose camera's image does not simply flip."""
+        mirror = RELATIONS[self.relation].mirror
+        if mirror is None:
+            raise ValueError(f"{self.relation} is read by the {RELATIONS[self.relation].camera} camera, whose "
+                             "image does not flip with the scene's left and right")
+        return replace(self, relation=mirror)
 
     @property
     def scene(self) -> str:

@@ -105,6 +105,8 @@ class Relation:
     arity: int  # number of objects (2, or 3 for in between)
     camera: str  # the camera whose coordinates the predicate reads
     holds: Callable[..., np.ndarray]
+    # The relation seen in the camera's image flipped left to right (None: not a flip of its image).
+    mirror: str | None = None
 
     def __call__(self, *coords, thresholds: Thresholds) -> np.ndarray:
         if len(coords) != self.arity:
@@ -115,11 +117,11 @@ class Relation:
 RELATIONS: dict[str, Relation] = {
     r.name: r
     for r in (
-        Relation("left_of", "on the left of", 2, "front", left_of),
-        Relation("right_of", "on the right of", 2, "front", right_of),
-        Relation("on_top_of", "on top of", 2, "front", on_top_of),
-        Relation("below", "below", 2, "front", below),
-        Relation("in_between", "in between", 3, "front", in_between),
+        Relation("left_of", "on the left of", 2, "front", left_of, "right_of"),
+        Relation("right_of", "on the right of", 2, "front", right_of, "left_of"),
+        Relation("on_top_of", "on top of", 2, "front", on_top_of, "on_top_of"),
+        Relation("below", "below", 2, "front", below, "below"),
+        Relation("in_between", "in between", 3, "front", in_between, "in_between"),
         Relation("in_front_of", "in front of", 2, "left", in_front_of),
         Relation("behind", "behind", 2, "left", behind),
         Relation("close_to", "close to", 2, "tilted", close_to),
