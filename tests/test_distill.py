@@ -813,7 +813,7 @@ def test_shape_frames_paint_every_block_colour_one_grey_and_keep_the_rest_grey()
 
 
 def test_mirror_batch_flips_half_the_frames_their_actions_x_and_their_goal():
-    from zsrm.policy.training import mirror_batch
+    from zsrm.policy.mirror import mirror_batch
 
     g = torch.Generator().manual_seed(0)
     images = torch.randint(0, 256, (64, 3, 4, 5), generator=g, dtype=torch.uint8)
@@ -828,30 +828,102 @@ def test_mirror_batch_flips_half_the_frames_their_actions_x_and_their_goal():
     assert torch.equal(out_codes, torch.where(flipped, mirrors[codes], codes))
 
 
-def test_distill_mirror_reads_each_placing_task_as_its_mirror_too(pipeline, tmp_path):
-    """--mirror on rollouts of a place-left task and its mirror (and a stacking task, its own)."""
+@pytest.fixture(scope="module")
+def mirrored(pipeline, tmp_path_factory):
+    """The tiny pipeline's task policies, a third for GOALS[1]'s mirror goal, and rollouts of all three."""
+    root, left = tmp_path_factory.mktemp("mirrored"), TRAIN_TASKS[6].text
+    shutil.copytree(pipeline / "policies", root / "policies")
+    train(TrainConfig(goal=left, reward="zsrm", seed=0, **TINY), policy_folder(root / "policies", left).parent,
+          progress=False)
+    assert MultitaskRollouts(tasks=(*GOALS, left), policies=str(root / "policies"), episodes=2, envs=2,
+                             out=str(root / "rollouts")).run() == 0
+    return root
+
+
+def test_distill_mirror_reads_each_placing_task_as_its_mirror_too(pipeline, mirrored, tmp_path):
+    """--mirror on rollouts of a place-right task and its mirror (and a stacking task, its own)."""
     from zsrm.policy.training import cloning_data, identity
 
     left = TRAIN_TASKS[6].text  # the mirror of GOALS[1]
     assert parse_goal(GOALS[1]).mirrored().text == left and parse_goal(GOALS[0]).mirrored() == parse_goal(GOALS[0])
-    shutil.copytree(pipeline / "policies", tmp_path / "policies")
-    train(TrainConfig(goal=left, reward="zsrm", seed=0, **TINY), policy_folder(tmp_path / "policies", left).parent,
-          progress=False)
-    assert MultitaskRollouts(tasks=(*GOALS, left), policies=str(tmp_path / "policies"), episodes=2, envs=2,
-                             out=str(tmp_path / "rollouts")).run() == 0
-    data = cloning_data(RolloutData(tmp_path / "rollouts"), load_vlm("scene"), ["language"])
+    data = cloning_data(RolloutData(mirrored / "rollouts"), load_vlm("scene"), ["language"])
+    assert data.goals == [GOALS[0], left, GOALS[1]]  # TRAIN_TASKS order
     assert [data.goals[i] for i in data.mirror_codes()] == [GOALS[0], GOALS[1], left]
     assert "mirror" not in identity(DistillConfig(), "language", data)  # earlier runs' checkpoints still resume
     assert identity(DistillConfig(mirror=True), "language", data)["mirror"] is True
-    assert Distill(epochs=1, threads=1, policies=("language",), mirror=True, data=str(tmp_path / "rollouts"),
+    assert Distill(epochs=1, threads=1, policies=("language",), mirror=True, data=str(mirrored / "rollouts"),
                    out=str(tmp_path / "distill")).run() == 0
     summary, policies = load_distilled(tmp_path / "distill")
     # A table shows it apart from the same policy distilled without mirrored frames.
     assert summary["mirror"] is True and set(policies) == {"language_mirror"}
     # Rollouts without a task's mirror are refused before any work, in one line.
-    with pytest.raises(ValueError, match="needs each goal's mirror goal in the rollouts"):
-        Distill(epochs=1, threads=1, policies=("language",), mirror=True, data=str(pipeline / "rollouts"),
-                out=str(tmp_path / "refused")).run()
+    for option in ("mirror", "mirror_teachers"):
+        with pytest.raises(ValueError, match="mirroring needs each goal's mirror goal in the rollouts"):
+            Distill(epochs=1, threads=1, policies=("language",), data=str(pipeline / "rollouts"),
+                    out=str(tmp_path / "refused"), **{option: True}).run()
     assert not (tmp_path / "refused" / "language").exists()
     with pytest.raises(ValueError, match="left camera, whose image does not flip"):
         parse_goal("a red block in front of a green block").mirrored()
+
+
+def test_each_task_is_taught_by_whichever_of_it_and_its_mirror_the_zsrm_reward_rates_higher(tmp_path, monkeypatch):
+    import zsrm.policy.mirror as M
+
+    # The training return: the zsrm reward's, over the last three evaluations, from the trial's
+    # summary beside a sweep's policy or kept in trials/ beside the kept policies.
+    curve = [{"env_steps": k, "mean": 99.0, "train_reward": r} for k, r in enumerate([1.0, 2.0, 3.0, 7.0])]
+    kept = tmp_path / "results" / "task_policies" / "trial" / "policy"
+    kept.mkdir(parents=True)
+    (tmp_path / "results" / "trials").mkdir()
+    (tmp_path / "results" / "trials" / "trial.json").write_text(json.dumps({"curve": curve}))
+    assert M.teacher_return(kept) == pytest.approx(4.0)  # 2, 3, 7: the oracle's 99 is never read
+    (kept.parent / "summary.json").write_text(json.dumps({"curve": curve[:2]}))
+    assert M.teacher_return(kept) == pytest.approx(1.5)
+    with pytest.raises(FileNotFoundError, match="no trial summary for the task policy"):
+        M.teacher_return(tmp_path / "elsewhere" / "policy")
+    goals = [GOALS[0], TRAIN_TASKS[6].text, GOALS[1]]  # stack, left of, its mirror right of
+    returns = {"stack": 1.0, "left": 9.0, "right": 5.0}
+    monkeypatch.setattr(M, "teacher_return", lambda folder: returns[folder])
+    assert M.teaching_tasks(goals, ["stack", "left", "right"]) == [0, 1, 1]
+    returns["right"] = 10.0
+    assert M.teaching_tasks(goals, ["stack", "left", "right"]) == [0, 2, 2]
+    with pytest.raises(ValueError, match="mirror goal in the rollouts"):
+        M.teaching_tasks(goals[::2], ["stack", "right"])
+
+
+def test_distill_mirror_teachers_distils_and_relabels_a_task_with_its_mirrors_policy(mirrored, tmp_path,
+                                                                                      monkeypatch):
+    """The place-right task taught by the place-left policy: its rollouts mirrored, its DAgger labels
+    that policy's actions on the flipped frames, x negated."""
+    import zsrm.policy.mirror as M
+    from zsrm.policy.dagger import MirroredTeacher, Teacher
+    from zsrm.policy.training import cloning_data
+
+    left, right = TRAIN_TASKS[6].text, GOALS[1]
+    monkeypatch.setattr(M, "teacher_return", lambda folder: 9.0 if "left" in str(folder) else 1.0)
+    rollouts = RolloutData(mirrored / "rollouts")
+    data = cloning_data(rollouts, load_vlm("scene"), ["language"])
+    taught = M.taught_by(data, M.teaching_tasks(data.goals, [policy_folder(mirrored / "policies", g)
+                                                             for g in data.goals]))
+    codes = {g: data.goals.index(g) for g in data.goals}
+    assert taught.teaching == (codes[GOALS[0]], codes[left], codes[left])
+    mine, source = taught.codes == codes[right], data.codes == codes[left]
+    assert torch.equal(taught.images[mine], data.images[source].flip(-1))
+    assert torch.equal(taught.actions[mine][:, 0], -data.actions[source][:, 0])
+    assert torch.equal(taught.images[taught.codes == codes[left]], data.images[source])
+    out = tmp_path / "distill"
+    assert Distill(epochs=1, threads=1, policies=("language",), mirror_teachers=True, dagger_rounds=1,
+                   dagger_episodes=2, dagger_epochs=1, data=str(mirrored / "rollouts"), out=str(out)).run() == 0
+    summary, policies = load_distilled(out)
+    assert summary["mirror_teachers"] == {right: left}
+    assert set(policies) == {"language_mirror_teachers", "language_mirror_teachers_dagger"}
+    relabelled = np.load(out / "dagger" / "language" / "round_1" / "relabelled.npz")
+    frames = relabelled["frames"][relabelled["codes"] == codes[right]]
+    teacher = MirroredTeacher(policy_folder(mirrored / "policies", right), right,
+                              policy_folder(mirrored / "policies", left))
+    expected = Teacher(policy_folder(mirrored / "policies", left), left).actions(frames[:, :, ::-1].copy())
+    expected[:, 0] *= -1
+    assert np.allclose(relabelled["actions"][relabelled["codes"] == codes[right]], expected, atol=1e-6)
+    assert np.allclose(teacher.actions(frames), expected, atol=1e-6)
+    # the student rolled out in the place-right task's own scenes
+    assert teacher.scenes(1, 0).get_attr("task")[0] == parse_goal(right)

@@ -28,8 +28,9 @@ import torch
 from zsrm.common.files import read_json
 from zsrm.data.shards import load_npz, save_npz
 from zsrm.envs.rollout import run_vec_episodes
+from zsrm.policy.mirror import mirror_actions
 from zsrm.policy.models import DistilledPolicy, embed_goals, load_policy, save_policy
-from zsrm.policy.rollouts import DecisionRecorder, policy_folder, train_task_index
+from zsrm.policy.rollouts import DecisionRecorder, teacher_folders, train_task_index
 from zsrm.policy.training import CloningData, DistillConfig, run_epoch
 from zsrm.tasks.language import parse_goal
 
@@ -58,30 +59,16 @@ class Dagger:
 
     def __call__(self, cfg: DistillConfig, data: CloningData, vlm, rollouts, out: Path, progress: bool,
                  fresh: bool) -> dict[str, list[dict]]:
-        tutors = [Teacher(folder, goal) for folder, goal in zip(teacher_folders(rollouts, self.teachers), data.goals)]
+        folders = teacher_folders(rollouts, self.teachers)
+        teaching = data.teaching or range(len(data.goals))  # --mirror-teachers: a task may be taught by its mirror's
+        tutors = [Teacher(folders[i], goal) if j == i else MirroredTeacher(folders[i], goal, folders[j])
+                  for i, (goal, j) in enumerate(zip(data.goals, teaching))]
         return {name: dagger_policy(cfg, self.config, name, data, vlm, tutors, Path(out), progress, fresh)
                 for name in cfg.policies}
 
     def settings(self) -> dict:
         """What distill.json records of the method (the envs stepped together change nothing)."""
         return {k: v for k, v in asdict(self.config).items() if k != "envs"}
-
-
-def teacher_folders(rollouts, teachers: str | Path | None = None) -> list[str]:
-    """Each goal's task policy (in ``rollouts.goals`` order): the folder its rollouts were collected
-    with, or ``teachers``' (a folder of kept task policies, as ``zsrm multitask-policies`` keeps them)."""
-    if teachers is not None:
-        folders = [str(policy_folder(teachers, goal)) for goal in rollouts.goals]
-    else:
-        config = rollouts.manifest["config"]
-        by_goal = {parse_goal(t).text: p for t, p in zip(config["tasks"], config["policies"])}
-        folders = [by_goal[goal] for goal in rollouts.goals]
-    missing = [f for f in folders if not Path(f, "config.json").is_file()]
-    if missing:
-        raise FileNotFoundError(f"no task policy in {missing[0]} ({len(missing)} of {len(folders)} missing): "
-                                "DAgger labels with the task policies; pass --teachers (e.g. "
-                                "results/multitask/task_policies)")
-    return folders
 
 
 class Teacher:
@@ -113,6 +100,18 @@ class Teacher:
                                    for i in range(0, len(frames), batch)]).astype(np.float32)
         finally:
             venv.close()
+
+
+class MirroredTeacher(Teacher):
+    """Labels the frames of a task's scenes with the mirror task's policy: its action on each frame
+    flipped left to right, x negated (``zsrm distill --mirror-teachers``, :mod:`zsrm.policy.mirror`)."""
+
+    def __init__(self, folder: str | Path, goal: str, mirror_folder: str | Path):
+        super().__init__(folder, goal)  # the task's own scenes
+        self.mirror = Teacher(mirror_folder, parse_goal(goal).mirrored().text)
+
+    def actions(self, frames: np.ndarray, batch: int = 256) -> np.ndarray:
+        return mirror_actions(self.mirror.actions(np.ascontiguousarray(frames[:, :, ::-1]), batch))
 
 
 def relabel_task(student: DistilledPolicy, embedding: torch.Tensor, teacher: Teacher, episodes: int, envs: int,

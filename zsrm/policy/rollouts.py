@@ -73,6 +73,23 @@ def keep_task_policies(root: str | Path, keep: str | Path, trials) -> list[Path]
     return kept
 
 
+def teacher_folders(rollouts, teachers: str | Path | None = None) -> list[str]:
+    """Each goal's task policy (in ``rollouts.goals`` order): the folder its rollouts were collected
+    with, or ``teachers``' (a folder of kept task policies, as ``zsrm multitask-policies`` keeps them)."""
+    if teachers is not None:
+        folders = [str(policy_folder(teachers, goal)) for goal in rollouts.goals]
+    else:
+        config = rollouts.manifest["config"]
+        by_goal = {parse_goal(t).text: p for t, p in zip(config["tasks"], config["policies"])}
+        folders = [by_goal[goal] for goal in rollouts.goals]
+    missing = [f for f in folders if not Path(f, "config.json").is_file()]
+    if missing:
+        raise FileNotFoundError(f"no task policy in {missing[0]} ({len(missing)} of {len(folders)} missing): "
+                                "DAgger labels with the task policies and --mirror-teachers compares them; "
+                                "pass --teachers (e.g. results/multitask/task_policies)")
+    return folders
+
+
 @dataclass
 class RolloutConfig:
     """Which rollouts to collect (saved in the manifest: a folder resumes only with the same)."""

@@ -25,7 +25,8 @@ from zsrm.common.files import read_json, write_json
 from zsrm.common.registry import load_weights
 from zsrm.policy.models import (CONDITIONINGS, IMAGE_VIEWS, KEYPOINT_VIEWS, DistilledPolicy, PolicyConfig,
                                 embed_goals, load_policy, save_policy)
-from zsrm.policy.rollouts import RolloutData, train_task_index
+from zsrm.policy.mirror import mirror_batch, taught_by, teaching_tasks
+from zsrm.policy.rollouts import RolloutData, teacher_folders, train_task_index
 from zsrm.tasks.language import parse_goal
 
 # cpu reads grey frames: the scene VLM's trunk, pretrained on which colours are present, gives features
@@ -65,6 +66,9 @@ class DistillConfig:
     """zsrm's, not the paper's: each frame, with probability 1/2, mirrored left to right (the frame flipped,
     the action's x negated, "left of" read as "right of"): the scenes and the front camera are
     mirror-symmetric, so each placing task teaches its mirror task too"""
+    mirror_teachers: bool = False
+    """zsrm's, not the paper's: each task taught by the better of its task policy and its mirror task's, as
+    their training return under the zsrm reward says (the mirror's rollouts and DAgger labels mirrored)"""
     batch_size: int = 64
     """frames per step"""
     lr: float = 1e-4
@@ -132,6 +136,7 @@ class CloningData:
     embeddings: dict[str, torch.Tensor]
     camera: str
     action_repeat: int
+    teaching: tuple[int, ...] | None = None  # --mirror-teachers: each task's teaching task (zsrm.policy.mirror)
 
     def condition(self, cfg: PolicyConfig, codes: torch.Tensor) -> torch.Tensor | None:
         """What a policy of ``cfg`` reads of the goals of ``codes``."""
@@ -143,23 +148,14 @@ class CloningData:
         """Each goal's mirror goal's code (:meth:`~zsrm.tasks.language.Task.mirrored`); a ValueError when
         the data lacks one, or its camera's image is not the scene's left-right mirror."""
         if self.camera != "front":
-            raise ValueError(f"--mirror flips front-camera frames; these rollouts are the {self.camera} camera's")
+            raise ValueError(f"mirroring flips front-camera frames; these rollouts are the {self.camera} camera's")
         texts = [parse_goal(goal).mirrored().text for goal in self.goals]
         missing = sorted(set(texts) - set(self.goals))
         if missing:
-            raise ValueError(f"--mirror needs each goal's mirror goal in the rollouts; {missing[0]!r} is not")
+            raise ValueError(f"mirroring needs each goal's mirror goal in the rollouts; {missing[0]!r} is not")
         return torch.tensor([self.goals.index(t) for t in texts])
 
 
-def mirror_batch(images: torch.Tensor, actions: torch.Tensor, codes: torch.Tensor, mirrors: torch.Tensor,
-                 generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Half the frames (at random) mirrored left to right: flipped, their action's x (its first
-    component, in the camera's plane) negated, their goal its mirror goal's (``mirrors[code]``)."""
-    flip = torch.rand(len(codes), generator=generator) < 0.5
-    images, actions = images.clone(), actions.clone()
-    images[flip] = images[flip].flip(-1)
-    actions[flip, 0] = -actions[flip, 0]
-    return images, actions, torch.where(flip, mirrors[codes], codes)
 
 
 def embedding_kind(cfg: DistillConfig, conditioning: str) -> str:
@@ -239,8 +235,9 @@ def identity(cfg: DistillConfig, conditioning: str, data: CloningData) -> dict:
         d.pop("image_view")
     if not centres_text(cfg, conditioning, data.goals):  # as before centre_text existed
         d.pop("centre_text")
-    if not cfg.mirror:  # as before mirror existed
-        d.pop("mirror")
+    for key in ("mirror", "mirror_teachers"):
+        if not d[key]:  # as before they existed
+            d.pop(key)
     return json.loads(json.dumps(d))
 
 
@@ -301,8 +298,10 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
     vlm = load_vlm(cfg.vlm)
     rollouts = RolloutData(data_folder)
     data = cloning_data(rollouts, vlm, [embedding_kind(cfg, name) for name in cfg.policies])
-    if cfg.mirror:
+    if cfg.mirror or cfg.mirror_teachers:
         data.mirror_codes()  # refuse rollouts it cannot mirror before any work
+    if cfg.mirror_teachers:
+        data = taught_by(data, teaching_tasks(data.goals, teacher_folders(rollouts)))
     policies = {name: train_policy(cfg, name, data, vlm, Path(out) / name, progress, fresh)
                 for name in cfg.policies}
     rounds = dagger(cfg, data, vlm, rollouts, Path(out), progress, fresh) if dagger is not None else {}
@@ -311,6 +310,8 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
                **({"centre_text": True} if "language" in cfg.policies and centres_text(cfg, "language", data.goals) else {}),
                **({"keypoint_view": cfg.keypoint_view} if "grounded" in cfg.policies else {}),
                **({"mirror": True} if cfg.mirror else {}),
+               **({"mirror_teachers": {g: data.goals[j] for g, j in zip(data.goals, data.teaching) if g != data.goals[j]}}
+                  if cfg.mirror_teachers else {}),
                **({"image_view": cfg.image_view} if set(cfg.policies) - {"grounded"} else {}), "data": str(data_folder),
                "frames": len(data.actions), "goals": data.goals,
                "policies": {name: {"folder": name, "final_loss": t["final_loss"]}
@@ -331,16 +332,20 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
 
 DAGGER_SUFFIX = "_dagger"  # a DAgger run's policy in a table, beside its behaviour cloning
 MIRROR_SUFFIX = "_mirror"  # a policy distilled with --mirror, beside one without
+MIRROR_TEACHERS_SUFFIX = "_mirror_teachers"  # one distilled with --mirror-teachers
 
 
 def load_distilled(out: str | Path) -> tuple[dict, dict[str, DistilledPolicy]]:
     """``out/distill.json`` and the policies it lists. A DAgger run's policy is two: ``<name>`` (its
     behaviour cloning, the paper's method) and ``<name>_dagger`` (its last round, zsrm's). A run with
-    ``--mirror`` names its policies ``<name>_mirror`` (and ``<name>_mirror_dagger``)."""
+    ``--mirror`` names its policies ``<name>_mirror`` (and ``<name>_mirror_dagger``), one with
+    ``--mirror-teachers`` ``<name>_mirror_teachers``; a run with both, ``<name>_mirror_mirror_teachers``."""
     summary = read_json(Path(out) / "distill.json", "the summary of zsrm distill")
     if not isinstance(summary.get("policies"), dict) or not summary["policies"]:
         raise ValueError(f"{Path(out) / 'distill.json'} lists no policies; rerun zsrm distill")
-    policies, suffix = {}, MIRROR_SUFFIX if summary.get("mirror") else ""
+    policies = {}
+    suffix = (MIRROR_SUFFIX if summary.get("mirror") else "") + \
+        (MIRROR_TEACHERS_SUFFIX if "mirror_teachers" in summary else "")
     for name, entry in summary["policies"].items():
         entry = entry if isinstance(entry, dict) else {}
         if "rounds" in entry:  # zsrm.policy.dagger
