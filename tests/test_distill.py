@@ -927,3 +927,12 @@ def test_distill_mirror_teachers_distils_and_relabels_a_task_with_its_mirrors_po
     assert np.allclose(teacher.actions(frames), expected, atol=1e-6)
     # the student rolled out in the place-right task's own scenes
     assert teacher.scenes(1, 0).get_attr("task")[0] == parse_goal(right)
+    # The table names the rows and says which tasks their mirrors taught.
+    assert EvalMultitask(policies=str(out), data=str(mirrored / "rollouts"), seeds=1, tasks=1, threads=1,
+                         out=str(tmp_path / "table2.json")).run() == 0
+    table = json.loads((tmp_path / "table2.json").read_text())
+    assert table["mirror_teachers"] == {right: left}
+    assert {"language_mirror_teachers", "language_mirror_teachers_dagger"} <= set(table)
+    md = (tmp_path / "table2.md").read_text()
+    assert "| Language Cond. + mirrored teachers + DAgger (zsrm) |" in md
+    assert "mirrored teachers: a task is taught by its mirror task's policy" in md and f"{right} <- {left}" in md

@@ -23,7 +23,7 @@ from zsrm.common.files import write_json, write_text
 from zsrm.envs.rollout import run_vec_episodes
 from zsrm.evaluation.plots import pyplot, save_figure
 from zsrm.policy.models import DistilledPolicy, embed_goals
-from zsrm.policy.training import DAGGER_SUFFIX, MIRROR_SUFFIX
+from zsrm.policy.training import DAGGER_SUFFIX, MIRROR_SUFFIX, MIRROR_TEACHERS_SUFFIX
 from zsrm.rl.config import STACKING, TrainConfig, goal_relation
 from zsrm.rl.envs import make_vec
 from zsrm.rl.evaluate import mean_se_cell
@@ -35,12 +35,13 @@ from zsrm.tasks.relations import RELATIONS, holds_in_world
 EVAL_SEED = 3_000_000  # evaluation scenes: seeds apart from the training and collection envs'
 PAPER_POLICIES = {"none": "No Conditioning", "primitive": "Primitive Code Cond.", "language": "Language Cond."}
 # Table order: the paper's three, zsrm's grounded variant, each distilled with zsrm's DAgger rounds,
-# then each with zsrm's mirrored frames (with and without DAgger).
+# then each with zsrm's mirror methods (zsrm.policy.mirror), without and with DAgger.
 _BASES = [*PAPER_POLICIES.items(), ("grounded", "Grounded Language Cond.")]
+_MIRRORS = [(MIRROR_SUFFIX, " + mirror"), (MIRROR_TEACHERS_SUFFIX, " + mirrored teachers")]
 POLICY_NAMES = {**PAPER_POLICIES, "grounded": "Grounded Language Cond. (zsrm)",
                 **{f"{n}{DAGGER_SUFFIX}": f"{label} + DAgger (zsrm)" for n, label in _BASES},
-                **{f"{n}{MIRROR_SUFFIX}{dagger}": f"{label} + mirror{' + DAgger' if dagger else ''} (zsrm)"
-                   for dagger in ("", DAGGER_SUFFIX) for n, label in _BASES}}
+                **{f"{n}{suffix}{dagger}": f"{label}{words}{' + DAgger' if dagger else ''} (zsrm)"
+                   for suffix, words in _MIRRORS for dagger in ("", DAGGER_SUFFIX) for n, label in _BASES}}
 SPREADS = ("seen", "unseen")
 SPLITS = ("train", "test")
 
@@ -230,9 +231,24 @@ def table_markdown(table: dict) -> str:
               + (f" + DAgger: {table['dagger']['rounds']} rounds of DAgger-style relabelling after behaviour "
                  "cloning (zsrm's method, `zsrm distill --dagger-rounds`), not the paper's behaviour cloning alone."
                  if "dagger" in table else "")
+              + mirror_notes(table)
               + (f" zsrm's best one-for-all policy: {POLICY_NAMES[table['best']['policy']]} ({table['best']['chosen_by']})."
                  if "best" in table else "")]
     return "\n".join(lines + relations_markdown(table)) + "\n"
+
+
+def mirror_notes(table: dict) -> str:
+    """What the table's mirror rows were distilled with (zsrm.policy.mirror)."""
+    notes = ""
+    if any(n.removesuffix(DAGGER_SUFFIX).removesuffix(MIRROR_TEACHERS_SUFFIX).endswith(MIRROR_SUFFIX)
+           for n in table if n in POLICY_NAMES):
+        notes += (" + mirror: each frame, with probability 1/2, mirrored left to right in distillation, its action's "
+                  "x negated and its goal's left and right swapped (`zsrm distill --mirror`).")
+    if "mirror_teachers" in table:
+        taught = "; ".join(f"{goal} <- {by}" for goal, by in table["mirror_teachers"].items())
+        notes += (" + mirrored teachers: a task is taught by its mirror task's policy, mirrored, where the zsrm "
+                  f"reward rates that policy higher (`zsrm distill --mirror-teachers`): {taught}.")
+    return notes
 
 
 def table_relations(table: dict) -> list[str]:

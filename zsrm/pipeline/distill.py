@@ -212,9 +212,11 @@ class EvalMultitask:
         # What the paper's policies read, from the policies themselves (one distill run: one view).
         views = {p.cfg.keypoint_view for p in policies.values() if p.cfg.conditioning != "grounded"}
         dagger = next((s["dagger"] for s in summaries if s.get("distillation") == "dagger"), None)
+        taught = next((s["mirror_teachers"] for s in summaries if "mirror_teachers" in s), None)
         table.update(schedule=summary["schedule"], tower=summary["tower"], **({"scenes": "choice"} if choice else {}),
                      **({"image_view": ", ".join(sorted(views))} if views else {}),
                      **language_text(policies), **({"dagger": dagger} if dagger else {}),
+                     **({"mirror_teachers": taught} if taught is not None else {}),
                      oracle_task_policies=ceiling(data),
                      meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
                                     if "primitive" in policies else None))
