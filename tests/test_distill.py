@@ -675,6 +675,13 @@ def test_the_best_policy_is_zsrms_own_chosen_on_the_training_tasks():
     assert best["policy"] == "grounded_dagger" and best["test_over_ceiling"] == {"left_of": {"seen": 0.5,
                                                                                              "unseen": 0.5}}
     assert M.best_policy({k: table[k] for k in ("language", "oracle_task_policies")}) is None
+    # A policy taught by mirrored teachers is also measured against the teachers that taught it.
+    table |= {"grounded_mirror_teachers_dagger": policy(40.0, 30.0),
+              "oracle_teachers": {"mean": 60.0, "relations": {"left_of": {"mean": 60.0}}}}
+    best = M.best_policy(table)
+    assert best["policy"] == "grounded_mirror_teachers_dagger"
+    assert best["test_over_ceiling"]["left_of"] == {"seen": 0.75, "unseen": 0.75}
+    assert best["test_over_teachers"]["left_of"] == {"seen": 0.5, "unseen": 0.5}
 
 
 def test_docstring_examples():
@@ -932,6 +939,11 @@ def test_distill_mirror_teachers_distils_and_relabels_a_task_with_its_mirrors_po
                          out=str(tmp_path / "table2.json")).run() == 0
     table = json.loads((tmp_path / "table2.json").read_text())
     assert table["mirror_teachers"] == {right: left}
+    # Beside the ceiling, the bar of the teachers that taught: the place-right task's is the place-left policy's.
+    own = {info["goal"]: np.mean(info["episode_rewards"]) for info in rollouts.infos}
+    assert table["oracle_task_policies"]["relations"]["right_of"]["mean"] == pytest.approx(own[right])
+    assert table["oracle_teachers"]["relations"]["right_of"]["mean"] == pytest.approx(own[left])
+    assert table["oracle_teachers"]["relations"]["on_top_of"] == table["oracle_task_policies"]["relations"]["on_top_of"]
     assert {"language_mirror_teachers", "language_mirror_teachers_dagger"} <= set(table)
     md = (tmp_path / "table2.md").read_text()
     assert "| Language Cond. + mirrored teachers + DAgger (zsrm) |" in md

@@ -63,6 +63,16 @@ def ceiling(data) -> dict:
             "relations": relation_cells(data.goals, [info["episode_rewards"] for info in data.infos])}
 
 
+def taught_ceiling(data, taught: dict[str, str]) -> dict:
+    """``oracle_teachers``: :func:`ceiling` with each task's episodes those of the task policy that
+    taught it (``taught``: goal -> its mirror goal, for the tasks ``zsrm distill --mirror-teachers``
+    taught with their mirror task's policy): the bar of the policies that teachers distilled."""
+    rewards = {info["goal"]: info["episode_rewards"] for info in data.infos}
+    per_task = [rewards[taught.get(goal, goal)] for goal in data.goals]
+    return {**mean_se_cell([r for episodes in per_task for r in episodes]), "tasks": len(data.goals),
+            "relations": relation_cells(data.goals, per_task)}
+
+
 def task_seed(index: int) -> int:
     """The first scene seed of the ``index``-th goal of a split: Table 2's scenes of that goal."""
     return EVAL_SEED + 1000 * index
@@ -185,11 +195,18 @@ def best_policy(table: dict) -> dict | None:
     if not ours:
         return None
     name = max(ours, key=lambda n: table[n]["seen"]["train"]["mean"])
-    ceilings = table["oracle_task_policies"].get("relations", {})
-    return {"policy": name, "chosen_by": "zsrm's own policies' highest mean on the training tasks, seen spread",
-            "test_over_ceiling": {r: {s: table[name][s]["test"]["relations"][r]["mean"] / top["mean"]
-                                      if top["mean"] else None for s in SPREADS}
-                                  for r, top in ceilings.items() if r in table[name]["seen"]["test"].get("relations", {})}}
+    best = {"policy": name, "chosen_by": "zsrm's own policies' highest mean on the training tasks, seen spread",
+            "test_over_ceiling": test_over(table[name], table["oracle_task_policies"])}
+    if MIRROR_TEACHERS_SUFFIX in name and "oracle_teachers" in table:  # and over the teachers it learnt from
+        best["test_over_teachers"] = test_over(table[name], table["oracle_teachers"])
+    return best
+
+
+def test_over(cells: dict, ceiling: dict) -> dict:
+    """A policy's test score over a ceiling's, per relation and spread (None over a ceiling of 0)."""
+    tested = cells["seen"]["test"].get("relations", {})
+    return {r: {s: cells[s]["test"]["relations"][r]["mean"] / top["mean"] if top["mean"] else None for s in SPREADS}
+            for r, top in ceiling.get("relations", {}).items() if r in tested}
 
 
 def primitive_mapping(policy: DistilledPolicy, vlm, goals: list[str]) -> dict[str, str]:
@@ -272,9 +289,13 @@ def relations_markdown(table: dict) -> list[str]:
                 cells = [table[name][s][p]["relations"][relation] for s in SPREADS for p in SPLITS]
                 lines.append(f"| {RELATIONS[relation].phrase} | {POLICY_NAMES[name]} | "
                              + " | ".join(f"{c['mean']:.1f} +- {c['se']:.1f}" for c in cells) + " |")
-        if relation in ceilings:
-            top = ceilings[relation]
-            lines.append(f"| {RELATIONS[relation].phrase} | the task policies (ceiling) | {top['mean']:.1f} +- "
+        teachers = table.get("oracle_teachers", {}).get("relations", {})  # --mirror-teachers rows' teachers
+        for label, tops in (("the task policies (ceiling)", ceilings), ("the task policies that taught (mirrored)",
+                                                                        teachers)):
+            if relation not in tops:
+                continue
+            top = tops[relation]
+            lines.append(f"| {RELATIONS[relation].phrase} | {label} | {top['mean']:.1f} +- "
                          f"{top['se']:.1f} |" + " |" * (len(SPREADS) * len(SPLITS) - 1))
     return lines
 

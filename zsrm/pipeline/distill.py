@@ -182,7 +182,7 @@ class EvalMultitask:
         import torch
 
         from zsrm.evaluation.multitask import (best_policy, ceiling, evaluate_policies, primitive_mapping,
-                                               split_goals, write_table)
+                                               split_goals, taught_ceiling, write_table)
         from zsrm.policy.rollouts import RolloutData
         from zsrm.policy.training import load_distilled_runs
         from zsrm.vlm import load_vlm
@@ -218,6 +218,7 @@ class EvalMultitask:
                      **language_text(policies), **({"dagger": dagger} if dagger else {}),
                      **({"mirror_teachers": taught} if taught is not None else {}),
                      oracle_task_policies=ceiling(data),
+                     **({"oracle_teachers": taught_ceiling(data, taught)} if taught is not None else {}),
                      meta=self.meta(summary, splits, primitive_mapping(policies["primitive"], vlm, splits["test"])
                                     if "primitive" in policies else None))
         best = best_policy(table)
