@@ -227,6 +227,9 @@ SIDE = [
      "and each round's record of `zsrm distill --policies grounded --dagger-rounds 3 --out runs/multitask/distill-dagger-none`)"),
     ("side/multitask/table2_dagger9.*", "zsrm's grounded policy after nine DAgger rounds instead of six: no better on "
      "the right of (test 18.2 / 19.7, seen / unseen)"),
+    ("side/multitask/table2_mirror.*", "zsrm's grounded policy distilled with half its frames mirrored left to right "
+     "(`zsrm distill --mirror`): behaviour cloning places left and right alike but weakly (19.9 / 14.7, test, seen); "
+     "after six DAgger rounds left of 64.8, right of still 17.1"),
     ("side/multitask/v1/**", "Table 2 as measured before 2026-12-05, from the v1 task policies (200k steps, action "
      "repeat 2; placing at 1 to 49): the table, distillation seeds 1-3, choice scenes and their task policies"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
