@@ -79,13 +79,22 @@ results: setup
 	# zsrm's: the grounded policy, behaviour cloning and then DAgger-style relabelling
 	$(VENV)/bin/zsrm distill --schedule cpu --policies grounded --keypoint-view shape --dagger-rounds 6 --threads 1 \
 		--data data/multitask/rollouts --out runs/multitask/distill-dagger
+	# ... each task taught by the better of its task policy and its mirror task's (the zsrm reward's judgement)
+	$(VENV)/bin/zsrm distill --schedule cpu --policies grounded --keypoint-view shape --mirror-teachers --dagger-rounds 6 \
+		--threads 1 --data data/multitask/rollouts --out runs/multitask/distill-mirror-teachers
 	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill runs/multitask/distill-dagger \
-		--data data/multitask/rollouts --seeds 50 --out results/table2.json
+		runs/multitask/distill-mirror-teachers --data data/multitask/rollouts --seeds 50 --out results/table2.json
 	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill-colour --data data/multitask/rollouts \
 		--seeds 50 --out results/multitask/table2_colour.json
 	# the stacking goals in choice scenes (a third block: colour decides the base), the table's best policy
 	OMP_NUM_THREADS=1 $(PY) benchmarks/choice_scenes.py --policies runs/multitask/distill runs/multitask/distill-dagger \
-		--names none language grounded grounded_dagger --best table --out results/multitask/choice_scenes.json
+		runs/multitask/distill-mirror-teachers --names none language grounded grounded_dagger \
+		grounded_mirror_teachers_dagger --best table --out results/multitask/choice_scenes.json
+	# side: half the frames mirrored instead (results/side/multitask/table2_mirror.*)
+	$(VENV)/bin/zsrm distill --schedule cpu --policies grounded --keypoint-view shape --mirror --dagger-rounds 6 \
+		--threads 1 --data data/multitask/rollouts --out runs/multitask/distill-mirror
+	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill-mirror --data data/multitask/rollouts --seeds 50 \
+		--out results/side/multitask/table2_mirror.json
 	# Table 2 as measured before 2026-12-05 (results/side/multitask/v1/): the v1 task policies (200k steps,
 	# action repeat 2), distillation seeds 0-3, choice scenes
 	$(VENV)/bin/zsrm multitask-policies --config v1 --steps 200000 --root runs/multitask/policies-v1 \

@@ -81,7 +81,10 @@ def _table2(d: dict) -> str:
     best = d["best"]
     ratios = ", ".join(f"{r.replace('_', ' ')} {_slash(v[s] for s in ('seen', 'unseen'))}"
                        for r, v in best["test_over_ceiling"].items())
-    return f"{paper}; zsrm's best ({best['policy']}), test / ceiling, seen / unseen: {ratios}"
+    teachers = ", ".join(f"{r.replace('_', ' ')} {_slash(v[s] for s in ('seen', 'unseen'))}"
+                         for r, v in best.get("test_over_teachers", {}).items())
+    return (f"{paper}; zsrm's best ({best['policy']}), test / ceiling, seen / unseen: {ratios}"
+            + (f"; test / the teachers that taught it: {teachers}" if teachers else ""))
 
 
 def _colour(d: dict) -> str:
@@ -131,8 +134,8 @@ FIGURES = [
            "zsrm reward-curve --out results/figure5"),
     Figure("Figure 6: final oracle episode reward", "rl/summary.json", _figure6, FIGURE6),
     Figure("Table 2: distilled policies on the blue test tasks (grey frames)", "table2.json", _table2,
-           "zsrm eval-multitask --policies runs/multitask/distill runs/multitask/distill-dagger --seeds 50 "
-           "--out results/table2.json"),
+           "zsrm eval-multitask --policies runs/multitask/distill runs/multitask/distill-dagger "
+           "runs/multitask/distill-mirror-teachers --seeds 50 --out results/table2.json"),
     # zsrm's own claims
     Figure("Scripted controllers reach every goal (success)", "scripted_success.json", _scripted,
            "zsrm scripted-eval --episodes 20 --out results/scripted_success.json"),
@@ -159,7 +162,8 @@ FIGURES = [
     Figure("Choice scenes (a third block; colour decides the base): zsrm's best on the blue stacking goals",
            "multitask/choice_scenes.json", _choice,
            "python benchmarks/choice_scenes.py --policies runs/multitask/distill runs/multitask/distill-dagger "
-           "--names none language grounded grounded_dagger --best table --out results/multitask/choice_scenes.json"),
+           "runs/multitask/distill-mirror-teachers --names none language grounded grounded_dagger "
+           "grounded_mirror_teachers_dagger --best table --out results/multitask/choice_scenes.json"),
     Figure("`make demo`: zsrm-trained policy / random on place_right", "demo.json",
            lambda d: f"{_pm(d, 'zsrm_policy_mean', 'zsrm_policy_se')} / "
                      f"{_pm(d, 'random_policy_mean', 'random_policy_se')}",
@@ -230,6 +234,8 @@ SIDE = [
     ("side/multitask/table2_mirror.*", "zsrm's grounded policy distilled with half its frames mirrored left to right "
      "(`zsrm distill --mirror`): behaviour cloning places left and right alike but weakly (19.9 / 14.7, test, seen); "
      "after six DAgger rounds left of 64.8, right of still 17.1"),
+    ("side/multitask/table2_mirror_teachers_seed1.*", "zsrm's grounded policy distilled from mirrored teachers, "
+     "behaviour cloning, distillation seed 1 (Table 2's is seed 0)"),
     ("side/multitask/v1/**", "Table 2 as measured before 2026-12-05, from the v1 task policies (200k steps, action "
      "repeat 2; placing at 1 to 49): the table, distillation seeds 1-3, choice scenes and their task policies"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
