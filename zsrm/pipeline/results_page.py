@@ -236,6 +236,9 @@ SIDE = [
      "after six DAgger rounds left of 64.8, right of still 17.1"),
     ("side/multitask/table2_mirror_teachers_seed1.*", "zsrm's grounded policy distilled from mirrored teachers, "
      "behaviour cloning, distillation seed 1 (Table 2's is seed 0)"),
+    ("side/multitask/choice_mirror_teachers_bc.json", "choice scenes: zsrm's grounded policy from mirrored teachers, "
+     "behaviour cloning alone, stacks on its base at 44.5 / 45.7 (training / blue goals); its six DAgger rounds take "
+     "it down to 28.3 / 25.6"),
     ("side/multitask/v1/**", "Table 2 as measured before 2026-12-05, from the v1 task policies (200k steps, action "
      "repeat 2; placing at 1 to 49): the table, distillation seeds 1-3, choice scenes and their task policies"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
