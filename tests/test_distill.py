@@ -948,3 +948,13 @@ def test_distill_mirror_teachers_distils_and_relabels_a_task_with_its_mirrors_po
     md = (tmp_path / "table2.md").read_text()
     assert "| Language Cond. + mirrored teachers + DAgger (zsrm) |" in md
     assert "mirrored teachers: a task is taught by its mirror task's policy" in md and f"{right} <- {left}" in md
+
+
+def test_relation_word_probe_reads_each_placing_goal_and_its_mirror(pipeline, tmp_path, monkeypatch):
+    out = tmp_path / "probe.json"
+    run_probe("relation_word_probe.py", monkeypatch, "--policies", str(pipeline / "distill"), "--names", "language",
+              "--seeds", "1", "--tasks", "1", "--out", str(out))
+    probe = json.loads(out.read_text())
+    assert set(probe["language"]) == {"train", "test"}
+    for cell in probe["language"].values():
+        assert set(cell) == {"own", "mirrored"} and all(c["episodes"] == 1 for c in cell.values())

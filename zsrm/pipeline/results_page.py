@@ -239,6 +239,9 @@ SIDE = [
     ("side/multitask/choice_mirror_teachers_bc.json", "choice scenes: zsrm's grounded policy from mirrored teachers, "
      "behaviour cloning alone, stacks on its base at 44.5 / 45.7 (training / blue goals); its six DAgger rounds take "
      "it down to 28.3 / 25.6"),
+    ("side/multitask/relation_word_probe.json", "the grounded policies reading their placing goal with left and right "
+     "swapped (probes/relation_word_probe.py): zsrm's best drops from 59.4 to 4.4 on the test goals, so it places by the "
+     "word, not by the start layout alone"),
     ("side/multitask/v1/**", "Table 2 as measured before 2026-12-05, from the v1 task policies (200k steps, action "
      "repeat 2; placing at 1 to 49): the table, distillation seeds 1-3, choice scenes and their task policies"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
