@@ -95,6 +95,16 @@ results: setup
 		--threads 1 --data data/multitask/rollouts --out runs/multitask/distill-mirror
 	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill-mirror --data data/multitask/rollouts --seeds 50 \
 		--out results/side/multitask/table2_mirror.json
+	# side: mirrored teachers with distillation seed 1; choice scenes of their behaviour cloning; the relation word
+	$(VENV)/bin/zsrm distill --schedule cpu --policies grounded --keypoint-view shape --mirror-teachers --seed 1 \
+		--dagger-rounds 6 --threads 1 --data data/multitask/rollouts --out runs/multitask/distill-mirror-teachers-seed1
+	$(VENV)/bin/zsrm eval-multitask --policies runs/multitask/distill-mirror-teachers-seed1 --data data/multitask/rollouts \
+		--seeds 50 --out results/side/multitask/table2_mirror_teachers_seed1.json
+	OMP_NUM_THREADS=1 $(PY) benchmarks/choice_scenes.py --policies runs/multitask/distill-mirror-teachers \
+		--names grounded_mirror_teachers --out results/side/multitask/choice_mirror_teachers_bc.json
+	OMP_NUM_THREADS=1 $(PY) probes/relation_word_probe.py --policies runs/multitask/distill-dagger \
+		runs/multitask/distill-mirror-teachers --names grounded_dagger grounded_mirror_teachers_dagger --seeds 20 \
+		--out results/side/multitask/relation_word_probe.json
 	# Table 2 as measured before 2026-12-05 (results/side/multitask/v1/): the v1 task policies (200k steps,
 	# action repeat 2), distillation seeds 0-3, choice scenes
 	$(VENV)/bin/zsrm multitask-policies --config v1 --steps 200000 --root runs/multitask/policies-v1 \
