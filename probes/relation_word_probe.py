@@ -20,9 +20,10 @@ from tqdm import tqdm
 from zsrm.common.files import write_json
 from zsrm.evaluation.multitask import EVAL_SEED, split_goals, task_rewards, task_seed
 from zsrm.policy.models import embed_goals
-from zsrm.policy.training import load_distilled_runs
+from zsrm.policy.training import load_distilled_runs, runs_vlm
 from zsrm.rl.evaluate import mean_se_cell
 from zsrm.tasks.language import parse_goal
+from zsrm.vlm import load_vlm
 
 PLACING = ("left_of", "right_of")
 
@@ -42,7 +43,7 @@ def main() -> None:
     policies = {n: p for _, run in runs for n, p in run.items() if args.names is None or n in args.names}
     if not policies:
         raise SystemExit(f"no policy named {' or '.join(args.names)} in {' '.join(args.policies)}")
-    vlm = load_vlm_of(runs)
+    vlm = load_vlm(runs_vlm(runs))
     # Table 2's goal indices, so each goal's scenes are the ones eval-multitask scored.
     placing = {split: [(i, g) for i, g in enumerate(goals) if parse_goal(g).relation in PLACING][:args.tasks]
                for split, goals in split_goals().items()}
@@ -63,15 +64,6 @@ def main() -> None:
                                                          for k, v in cell.items()))
     write_json(args.out, out)
     print(f"wrote {args.out}")
-
-
-def load_vlm_of(runs):
-    from zsrm.vlm import load_vlm
-
-    vlms = {summary["vlm"] for summary, _ in runs}
-    if len(vlms) != 1:
-        raise SystemExit(f"the --policies folders read different VLMs ({sorted(vlms)})")
-    return load_vlm(vlms.pop())
 
 
 if __name__ == "__main__":

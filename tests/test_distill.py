@@ -888,14 +888,19 @@ def test_each_task_is_taught_by_whichever_of_it_and_its_mirror_the_zsrm_reward_r
     assert M.teacher_return(kept) == pytest.approx(1.5)
     with pytest.raises(FileNotFoundError, match="no trial summary for the task policy"):
         M.teacher_return(tmp_path / "elsewhere" / "policy")
+    from zsrm.policy.training import CloningData
+
     goals = [GOALS[0], TRAIN_TASKS[6].text, GOALS[1]]  # stack, left of, its mirror right of
+    data = lambda goals: CloningData(torch.zeros(0), torch.zeros(0), torch.zeros(0), goals, {}, "front", 4)
+    mirrors = data(goals).mirror_codes().tolist()
+    assert mirrors == [0, 2, 1]
     returns = {"stack": 1.0, "left": 9.0, "right": 5.0}
     monkeypatch.setattr(M, "teacher_return", lambda folder: returns[folder])
-    assert M.teaching_tasks(goals, ["stack", "left", "right"]) == [0, 1, 1]
+    assert M.teaching_tasks(mirrors, ["stack", "left", "right"]) == [0, 1, 1]
     returns["right"] = 10.0
-    assert M.teaching_tasks(goals, ["stack", "left", "right"]) == [0, 2, 2]
+    assert M.teaching_tasks(mirrors, ["stack", "left", "right"]) == [0, 2, 2]
     with pytest.raises(ValueError, match="mirror goal in the rollouts"):
-        M.teaching_tasks(goals[::2], ["stack", "right"])
+        data(goals[::2]).mirror_codes()
 
 
 def test_distill_mirror_teachers_distils_and_relabels_a_task_with_its_mirrors_policy(mirrored, tmp_path,
@@ -910,8 +915,8 @@ def test_distill_mirror_teachers_distils_and_relabels_a_task_with_its_mirrors_po
     monkeypatch.setattr(M, "teacher_return", lambda folder: 9.0 if "left" in str(folder) else 1.0)
     rollouts = RolloutData(mirrored / "rollouts")
     data = cloning_data(rollouts, load_vlm("scene"), ["language"])
-    taught = M.taught_by(data, M.teaching_tasks(data.goals, [policy_folder(mirrored / "policies", g)
-                                                             for g in data.goals]))
+    taught = M.taught_by(data, M.teaching_tasks(data.mirror_codes().tolist(),
+                                                [policy_folder(mirrored / "policies", g) for g in data.goals]))
     codes = {g: data.goals.index(g) for g in data.goals}
     assert taught.teaching == (codes[GOALS[0]], codes[left], codes[left])
     mine, source = taught.codes == codes[right], data.codes == codes[left]

@@ -283,13 +283,13 @@ def relations_markdown(table: dict) -> list[str]:
              "training tasks):", "", "| relation | policy | " + " | ".join(f"{s} {p}" for s in SPREADS for p in SPLITS)
              + " |", "|---" * (2 + len(SPREADS) * len(SPLITS)) + "|"]
     ceilings = table["oracle_task_policies"].get("relations", {})
+    teachers = table.get("oracle_teachers", {}).get("relations", {})  # --mirror-teachers rows' teachers
     for relation in relations:
         for name in POLICY_NAMES:
             if name in table:
                 cells = [table[name][s][p]["relations"][relation] for s in SPREADS for p in SPLITS]
                 lines.append(f"| {RELATIONS[relation].phrase} | {POLICY_NAMES[name]} | "
                              + " | ".join(f"{c['mean']:.1f} +- {c['se']:.1f}" for c in cells) + " |")
-        teachers = table.get("oracle_teachers", {}).get("relations", {})  # --mirror-teachers rows' teachers
         for label, tops in (("the task policies (ceiling)", ceilings), ("the task policies that taught (mirrored)",
                                                                         teachers)):
             if relation not in tops:

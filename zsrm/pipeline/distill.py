@@ -184,7 +184,7 @@ class EvalMultitask:
         from zsrm.evaluation.multitask import (best_policy, ceiling, evaluate_policies, primitive_mapping,
                                                split_goals, taught_ceiling, write_table)
         from zsrm.policy.rollouts import RolloutData
-        from zsrm.policy.training import load_distilled_runs
+        from zsrm.policy.training import load_distilled_runs, runs_vlm
         from zsrm.vlm import load_vlm
 
         check_writable(self.out)
@@ -194,8 +194,7 @@ class EvalMultitask:
         # The first run's settings; the grounded policy's view from the run that has one.
         summary = {**summaries[0], **next(({"keypoint_view": s["keypoint_view"]} for s in summaries
                                            if "keypoint_view" in s), {})}
-        if len({s["vlm"] for s in summaries}) > 1:
-            raise ValueError(f"the --policies folders read different VLMs ({sorted({s['vlm'] for s in summaries})})")
+        runs_vlm(runs)  # one VLM for them all
         if self.text_span:
             if "language" not in policies:
                 raise ValueError(f"--text-span is the language policy's; {self.policies} has none")

@@ -22,8 +22,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from zsrm.tasks.language import parse_goal
-
 RETURN_EVALUATIONS = 3  # a task policy's training return: the mean over its last three evaluations
 
 
@@ -69,19 +67,12 @@ def teacher_return(policy: str | Path) -> float:
     return float(np.mean(returns))
 
 
-def teaching_tasks(goals: list[str], policies: list[str | Path]) -> list[int]:
-    """For each goal (index into ``goals``), the goal whose task policy teaches it: its own, or its
-    mirror goal's when that policy's training return is higher (a ValueError when the mirror goal
-    is missing: every goal's mirror must be in the data)."""
+def teaching_tasks(mirrors: list[int], policies: list[str | Path]) -> list[int]:
+    """For each task, the task whose policy teaches it: its own, or its mirror task's
+    (``mirrors[i]``, as :meth:`~zsrm.policy.training.CloningData.mirror_codes` gives them) when that
+    policy's training return is higher."""
     returns = [teacher_return(p) for p in policies]
-    taught = []
-    for i, goal in enumerate(goals):
-        mirror = parse_goal(goal).mirrored().text
-        if mirror not in goals:
-            raise ValueError(f"--mirror-teachers needs each goal's mirror goal in the rollouts; {mirror!r} is not")
-        j = goals.index(mirror)
-        taught.append(j if returns[j] > returns[i] else i)
-    return taught
+    return [j if returns[j] > returns[i] else i for i, j in enumerate(mirrors)]
 
 
 def taught_by(data, teaching: list[int]):

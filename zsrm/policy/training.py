@@ -156,8 +156,6 @@ class CloningData:
         return torch.tensor([self.goals.index(t) for t in texts])
 
 
-
-
 def embedding_kind(cfg: DistillConfig, conditioning: str) -> str:
     return "grounded" if conditioning == "grounded" else cfg.text_embedding
 
@@ -299,9 +297,9 @@ def distill(cfg: DistillConfig, data_folder: str | Path, out: str | Path, progre
     rollouts = RolloutData(data_folder)
     data = cloning_data(rollouts, vlm, [embedding_kind(cfg, name) for name in cfg.policies])
     if cfg.mirror or cfg.mirror_teachers:
-        data.mirror_codes()  # refuse rollouts it cannot mirror before any work
+        mirrors = data.mirror_codes()  # refuse rollouts it cannot mirror before any work
     if cfg.mirror_teachers:
-        data = taught_by(data, teaching_tasks(data.goals, teacher_folders(rollouts)))
+        data = taught_by(data, teaching_tasks(mirrors.tolist(), teacher_folders(rollouts)))
     policies = {name: train_policy(cfg, name, data, vlm, Path(out) / name, progress, fresh)
                 for name in cfg.policies}
     rounds = dagger(cfg, data, vlm, rollouts, Path(out), progress, fresh) if dagger is not None else {}
@@ -354,6 +352,14 @@ def load_distilled(out: str | Path) -> tuple[dict, dict[str, DistilledPolicy]]:
         else:
             policies[name + suffix] = load_policy(Path(out) / entry.get("folder", name))
     return summary, policies
+
+
+def runs_vlm(runs) -> str:
+    """The VLM every one of several ``zsrm distill`` runs (:func:`load_distilled_runs`) read."""
+    vlms = {summary["vlm"] for summary, _ in runs}
+    if len(vlms) > 1:
+        raise ValueError(f"the --policies folders read different VLMs ({sorted(vlms)})")
+    return vlms.pop()
 
 
 def load_distilled_runs(outs) -> list[tuple[dict, dict[str, DistilledPolicy]]]:
