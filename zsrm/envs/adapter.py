@@ -86,7 +86,7 @@ class SceneAdapter:
     bodies: Mapping[str, str] = {}  # PRIVILEGED, optional: phrase -> the MuJoCo body whose position is the object's
     object_width: float = 0.06  # a typical object's width in metres (the labeler's pixel scale)
     table_height: float | None = None  # world z (metres) of the surface the objects rest on: the labeler reads the tilted camera on it in metres; None: in pixels
-    subsets: bool | None = None  # the env can hold any subset of the objects (None: yes with an env_id, no for a bare XML)
+    subsets: bool | None = None  # the env can hold any subset of the objects (None: yes with an env_id, or a bare XML whose bodies are named)
 
     @property
     def name(self) -> str:
@@ -95,8 +95,11 @@ class SceneAdapter:
 
     @property
     def holds_subsets(self) -> bool:
-        """Can a scene hold only some of the objects (exploration scenes with fewer of them)?"""
-        return bool(self.env_id) if self.subsets is None else bool(self.subsets)
+        """Can a scene hold only some of the objects (exploration scenes with fewer of them)? A bare
+        XML can when :attr:`bodies` names each object's body: zsrm parks the others away."""
+        if self.subsets is not None:
+            return bool(self.subsets)
+        return bool(self.env_id) or bool(self.xml and self.bodies)
 
     @property
     def roles(self) -> dict[str, str]:
@@ -116,7 +119,17 @@ class SceneAdapter:
         if not self.env_id and self.xml:
             from zsrm.envs.xml_scene import XmlSceneEnv
 
-            env = XmlSceneEnv(self.xml, cameras=tuple(cameras), image_size=int(image_size), **env_kwargs)
+            held = None
+            if self.holds_subsets:
+                if not self.bodies:
+                    raise SceneAdapterError(f"{self.name}: a bare XML holds subsets of its objects only when bodies "
+                                            "names each object's body (or set subsets = False)")
+                held = tuple(self.bodies[p] for p in (self.objects if objects is None else objects))
+            try:
+                env = XmlSceneEnv(self.xml, cameras=tuple(cameras), image_size=int(image_size), objects=held,
+                                  **env_kwargs)
+            except ValueError as err:  # what the XML alone cannot do
+                raise SceneAdapterError(f"{self.name}: {err}") from None
             return gym.wrappers.TimeLimit(env, max_episode_steps=100)  # zsrm's episodes (zsrm.envs.EPISODE_STEPS)
         if not self.env_id:
             raise SceneAdapterError(f"{self.name}: give env_id (a gymnasium id) or xml, or override make_env")
@@ -149,8 +162,9 @@ class SceneAdapter:
             raise NotImplementedError(f"{self.name}: name each object's body in bodies, or write "
                                       "object_positions(env), the privileged accessor")
         base = env.unwrapped
+        held = getattr(base, "held_bodies", None)  # a bare XML's scene of some of the objects
         return {p: base.data.xpos[mujoco.mj_name2id(base.model, mujoco.mjtObj.mjOBJ_BODY, b)].copy()
-                for p, b in self.bodies.items()}
+                for p, b in self.bodies.items() if held is None or b in held}
 
 
 # --- checks ---------------------------------------------------------------------------------
