@@ -43,9 +43,10 @@ class OwnScene(SceneAdapter):
 
 class OwnSceneFromXml(SceneAdapter):
     """The same scene from its MuJoCo XML alone, with no env of one's own: zsrm builds the env
-    (camera images in, the actuators' controls out: here the pusher's target position), and
-    reads the objects' positions from the bodies named here (privileged). Every scene holds all
-    four objects; a reset moves each by up to ``jitter`` metres."""
+    (camera images in, the actuators' controls out, normalised to [-1, 1] over their ctrlrange:
+    here the pusher's target position), and reads the objects' positions from the bodies named
+    here (privileged). Scenes hold any subset of the four (zsrm parks the others out of sight);
+    a reset moves each by up to ``jitter`` metres."""
 
     xml = str(Path(__file__).with_name("scene.xml"))
     env_kwargs = {"jitter": 0.1}

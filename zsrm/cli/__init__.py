@@ -14,7 +14,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from zsrm.cli.options import add_command, from_namespace  # noqa: E402
-from zsrm.pipeline import build, demo, distill, goals, learn, measure, reproduce, results_page  # noqa: E402
+from zsrm.pipeline import build, demo, distill, goals, learn, measure, own_scene, reproduce, results_page  # noqa: E402
 
 COMMANDS = {
     "parse-goal": goals.ParseGoal,
@@ -32,6 +32,7 @@ COMMANDS = {
     "reward-data": build.RewardData,
     "finetune": build.Finetune,
     "eval-reward": measure.EvalReward,
+    "own-scene": own_scene.OwnSceneChain,
     "eval-goals": goals.EvalGoals,
     "train": learn.Train,
     "rollout": learn.Rollout,

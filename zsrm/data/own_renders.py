@@ -62,25 +62,34 @@ class _Segmenter:
             ids += range(self.model.body_geomadr[b], self.model.body_geomadr[b] + self.model.body_geomnum[b])
         return np.array(ids, np.int64)
 
-    def visible(self, camera: str, positions: dict[str, np.ndarray], objects: tuple[str, ...]) -> np.ndarray:
-        """Pixels of each of ``objects`` seen by ``camera`` (0 for those not in ``positions``)."""
+    def mask(self, camera: str, positions: dict[str, np.ndarray], objects: tuple[str, ...]) -> np.ndarray:
+        """(size, size) uint8: which of ``objects`` each pixel of ``camera`` shows (1-based; 0: none)."""
         self.renderer.update_scene(self.data, camera=camera)
         seg = self.renderer.render()
         ids = np.where(seg[..., 1] == self.geom_type, seg[..., 0], -1)
-        return np.array([np.isin(ids, self._subtree(self._body_of(positions[o]))).sum() if o in positions else 0
-                         for o in objects])
+        out = np.zeros(ids.shape, np.uint8)
+        for j, o in enumerate(objects):
+            if o in positions:
+                out[np.isin(ids, self._subtree(self._body_of(positions[o])))] = j + 1
+        return out
+
+    def visible(self, camera: str, positions: dict[str, np.ndarray], objects: tuple[str, ...]) -> np.ndarray:
+        """Pixels of each of ``objects`` seen by ``camera`` (0 for those not in ``positions``)."""
+        mask = self.mask(camera, positions, objects)
+        return np.bincount(mask.ravel(), minlength=len(objects) + 1)[1:]
 
     def close(self):
         self.renderer.close()
 
 
 def render_own_scenes(adapter: SceneAdapter, indices: Iterable[int], seed: int = 0, stream: str = "train",
-                      size: int = 64, max_actions: int = 10, progress=None) -> dict:
+                      size: int = 64, max_actions: int = 10, progress=None, masks: bool = False) -> dict:
     """Render scenes ``indices`` of a seeded stream from every camera role.
 
     Returns one row per image (scene-major, roles in Table 1's order): ``images`` (N, size,
     size, 3) uint8, ``visible`` (N, K) visible pixels of each of the adapter's K objects,
-    ``in_scene`` (N, K) bool, ``camera`` (N,) index into the roles, ``scene_index`` (N,).
+    ``in_scene`` (N, K) bool, ``camera`` (N,) index into the roles, ``scene_index`` (N,); with
+    ``masks``, ``masks`` (N, size, size) uint8, each pixel's object (1-based, 0: none).
     """
     indices, objects = list(indices), tuple(adapter.objects)
     plans = [own_scene_plan(adapter, i, seed, stream, max_actions) for i in indices]
@@ -88,6 +97,8 @@ def render_own_scenes(adapter: SceneAdapter, indices: Iterable[int], seed: int =
     out = {"images": np.zeros((n, size, size, 3), np.uint8), "visible": np.zeros((n, k), np.int32),
            "in_scene": np.zeros((n, k), bool), "camera": np.tile(np.arange(len(ROLES), dtype=np.uint8), len(indices)),
            "scene_index": np.repeat(np.asarray(indices, np.int64), len(ROLES))}
+    if masks:
+        out["masks"] = np.zeros((n, size, size), np.uint8)
     env = seg = None
     current = None
     try:
@@ -120,16 +131,39 @@ def _render_one(adapter: SceneAdapter, env, seg: _Segmenter, plan: dict, out: di
     positions = adapter.object_positions(env)  # privileged: which objects there are, for the captions
     check_phrases_known(adapter, positions)
     out["images"][rows] = np.stack([images[r] for r in ROLES])
-    out["visible"][rows] = np.stack([seg.visible(adapter.roles[r], positions, objects) for r in ROLES])
+    role_masks = np.stack([seg.mask(adapter.roles[r], positions, objects) for r in ROLES])
+    out["visible"][rows] = [np.bincount(m.ravel(), minlength=len(objects) + 1)[1:] for m in role_masks]
+    if "masks" in out:
+        out["masks"][rows] = role_masks
     out["in_scene"][rows] = [o in positions for o in objects]
 
 
+def check_captions_vary(renders: dict, adapter: SceneAdapter, image_size: int = 64) -> None:
+    """Refuse renders whose presence captions cannot teach the objects' names: an object shown in
+    every render (or in none) is a word no caption ever contrasts, and the VLM trains at chance."""
+    from zsrm.vlm.presence import min_visible_pixels
+
+    shown = renders["visible"] >= min_visible_pixels(image_size)
+    always = [o for j, o in enumerate(adapter.objects) if shown[:, j].all()]
+    never = [o for j, o in enumerate(adapter.objects) if not shown[:, j].any()]
+    if always or never:
+        what = "; ".join(part for part in (
+            f"{', '.join(always)} {'is' if len(always) == 1 else 'are'} shown in every render" if always else "",
+            f"{', '.join(never)} in none" if never else "") if part)
+        fix = ("let its scenes hold subsets of the objects (a bare XML: name each object's body in bodies; your own "
+               "env: an objects= keyword)" if always else "check the cameras see the objects and bodies names them")
+        raise ValueError(f"{adapter.name}: the presence captions never vary ({what}): the VLM could not learn which "
+                         f"word is which object; {fix}")
+
+
 def load_own_renders(folder: str | Path, adapter: SceneAdapter, scenes: int, shard_size: int, seed: int = 0,
-                     image_size: int = 64, progress: bool = True) -> dict:
+                     image_size: int = 64, progress: bool = True, masks: bool = False) -> dict:
     """The first ``scenes`` training scenes of the adapter's scene, rendered once and cached in
     ``folder`` shard by shard; arrays as :func:`render_own_scenes` returns them."""
     spec = {"scene": adapter.name, "objects": list(adapter.objects), "seed": seed, "shard_size": shard_size,
             "image_size": image_size, "stream": "train"}
+    if masks:  # renders made before masks existed keep their spec
+        spec["masks"] = True
     return load_cached_shards(folder, spec, scenes, shard_size, "renders", "render own scenes",
                               lambda indices, bar: render_own_scenes(adapter, indices, seed=seed, size=image_size,
-                                                                     progress=bar), progress)
+                                                                     progress=bar, masks=masks), progress)

@@ -10,7 +10,6 @@ from __future__ import annotations
 import os
 from importlib import resources
 
-os.environ.setdefault("MUJOCO_GL", "egl")
 # Mesa's software renderer: small images render faster in the calling thread.
 os.environ.setdefault("LP_NUM_THREADS", "0")
 

@@ -1,9 +1,6 @@
 """Gymnasium's InvertedDoublePendulum-v5, observed through rendered pixels only."""
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("MUJOCO_GL", "egl")
 
 import gymnasium as gym
 import numpy as np

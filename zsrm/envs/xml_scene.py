@@ -33,7 +33,6 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")
 
 import gymnasium as gym
 import mujoco
@@ -114,15 +113,22 @@ class XmlSceneEnv(gym.Env):
         return range(adr, adr + self.model.body_geomnum[body])
 
     def _park_absent(self) -> None:
-        """Absent bodies: drawn in a hidden group, touching nothing, weightless."""
-        for body in self._free:
+        """Absent bodies: drawn in a hidden group, touching nothing; held still where they wait."""
+        self._parked = []  # (qpos address, dof address, where) of each absent body
+        for k, (body, adr) in enumerate(self._free.items()):
             if body in self.held_bodies:
                 continue
             b = self.model.body(body).id
             for g in self._body_geoms(b):
                 self.model.geom_group[g] = HIDDEN_GROUP
                 self.model.geom_contype[g] = self.model.geom_conaffinity[g] = 0
-            self.model.body_gravcomp[b] = 1.0
+            dof = int(self.model.jnt_dofadr[self.model.body_jntadr[b]])
+            self._parked.append((adr, dof, PARK + [k, 0.0, 0.0]))
+
+    def _hold_parked(self) -> None:
+        for adr, dof, where in self._parked:
+            self.data.qpos[adr:adr + 3] = where
+            self.data.qvel[dof:dof + 6] = 0.0
 
     def _driven_body(self) -> tuple[int, list[int]]:
         """The body the actuators move through slide joints, and those joints (start="beside")."""
@@ -153,17 +159,21 @@ class XmlSceneEnv(gym.Env):
             mujoco.mj_resetDataKeyframe(self.model, self.data, 0)
         else:
             mujoco.mj_resetData(self.model, self.data)
-        for k, (body, adr) in enumerate(self._free.items()):
-            if body not in self.held_bodies:
-                self.data.qpos[adr:adr + 3] = PARK + [k, 0.0, 0.0]
+        self._hold_parked()
         self._place_objects()
         mujoco.mj_forward(self.model, self.data)
         if self._effector is not None:
             self._place_beside()
         self.data.ctrl[:] = self._hold_controls()
         for _ in range(SETTLE_STEPS):
-            mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+            self._physics_step()
         return self._observation(), {}
+
+    def _physics_step(self) -> None:
+        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        if self._parked:
+            self._hold_parked()
+            mujoco.mj_forward(self.model, self.data)
 
     def _place_objects(self) -> None:
         """Every held body's x and y moved by up to ``jitter``, apart from those placed before it."""
@@ -191,12 +201,12 @@ class XmlSceneEnv(gym.Env):
         reach = self._radius(body)
         others = [(self.data.xpos[self.model.body(b).id][:2].copy(), self._radius(self.model.body(b).id))
                   for b in self.held_bodies]
-        qpos0 = self.data.qpos.copy()
+        qpos0, start = self.data.qpos.copy(), self.data.xpos[body][:2].copy()
         for _ in range(TRIES):
             centre, r = others[int(self.np_random.integers(len(others)))]
             angle = self.np_random.uniform(0, 2 * np.pi)
             target = centre + (r + reach + MARGIN) * np.array([np.cos(angle), np.sin(angle)])
-            move = np.linalg.lstsq(axes, target - self.data.xpos[body][:2], rcond=None)[0]
+            move = np.linalg.lstsq(axes, target - start, rcond=None)[0]
             self.data.qpos[:] = qpos0
             for j, d in zip(joints, move):
                 adr = self.model.jnt_qposadr[j]
@@ -233,7 +243,7 @@ class XmlSceneEnv(gym.Env):
         else:
             ctrl = self.data.ctrl + np.clip(action, -1, 1) * self.step_size
         self.data.ctrl[:] = np.clip(ctrl, self._low, self._high)
-        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        self._physics_step()
         return self._observation(), 0.0, False, False, {}
 
     def body_position(self, body: str) -> np.ndarray:

@@ -102,7 +102,10 @@ def own_presence_eval(vlm: VisionLanguageModel, scene: str, n_images: int = 500,
     scores = sims - (sims.sum(axis=1, keepdims=True) - sims) / max(1, len(objects) - 1)
     present, absent = data["visible"] >= min_visible_pixels(image_size), data["visible"] == 0
     used = present | absent
-    result: dict = {f"auroc.{p}": round(auroc(scores[used[:, j], j], present[used[:, j], j]), 4)
+    # An object shown in every render (or in none) has no AUROC: say so rather than NaN.
+    unmeasured = {p: "present in every render" if not absent[:, j].any() else "absent from every render"
+                  for j, p in enumerate(objects) if not (present[:, j].any() and absent[:, j].any())}
+    result: dict = {f"auroc.{p}": None if p in unmeasured else round(auroc(scores[used[:, j], j], present[used[:, j], j]), 4)
                     for j, p in enumerate(objects)}
     result["meta"] = {
         "scene": adapter.name, "objects": list(objects), "n_images": int(n_images), "n_scenes": int(n_scenes),
@@ -111,6 +114,7 @@ def own_presence_eval(vlm: VisionLanguageModel, scene: str, n_images: int = 500,
         "score": "cos(image, 'a PHRASE') minus the mean cos of the other objects' probes",
         "counts": {p: {"present": int(present[:, j].sum()), "absent": int(absent[:, j].sum())}
                    for j, p in enumerate(objects)},
+        "unmeasured": unmeasured,
         "vlm": getattr(vlm, "meta", {}) if vlm.backend == "scene" else {"pretrained": getattr(vlm, "pretrained", None)},
         "machine": platform.platform(),
     }

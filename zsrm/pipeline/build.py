@@ -36,12 +36,13 @@ def pretrain_scene_vlm(cfg: PretrainConfig, fresh: bool = False, progress: bool 
     if fresh:
         shutil.rmtree(cfg.workdir, ignore_errors=True)
     if cfg.scene:  # a user's own scene: its renders, captioned with its objects' phrases
-        from zsrm.data.own_renders import load_own_renders
+        from zsrm.data.own_renders import check_captions_vary, load_own_renders
         from zsrm.envs.adapter import load_adapter
 
         adapter = load_adapter(cfg.scene)
         renders = load_own_renders(Path(cfg.workdir) / "own-renders", adapter, cfg.scenes, cfg.shard_size, cfg.seed,
-                                   cfg.image_size, progress)
+                                   cfg.image_size, progress, masks=cfg.zoom > 0)
+        check_captions_vary(renders, adapter, cfg.image_size)  # before any training
         return pretrain(cfg, renders, progress, objects=tuple(adapter.objects))
     renders = load_renders(Path(cfg.workdir) / "renders", cfg.scenes, cfg.shard_size, cfg.seed, cfg.image_size,
                            progress)

@@ -18,8 +18,9 @@ class TrainConfig:
     inverted pendulum of Figure 4, with the base, oracle, curiosity or random reward)"""
     scene: str | None = None
     """your own scene (docs/own-scene.md): a SceneAdapter as module:Class or a registered id; the goal then
-    names its objects by their phrases, and trains with the oracle, base, curiosity or random reward
-    (default: zsrm's own scenes, chosen by the goal)"""
+    names its objects by their phrases, and trains with the oracle, base, curiosity or random reward, or
+    zsrm with --reward-model (a student trained on the scene's data: zsrm own-scene); default: zsrm's own
+    scenes, chosen by the goal"""
     reward: Literal["oracle", "zsrm", "base", "vice", "curiosity", "random"] = "oracle"
     """reward the policy learns from: oracle (privileged), zsrm (the full reward model), base (the VLM's
     image-goal cosine; for the pendulum 1 when the goal beats the other poses' sentences), vice (privileged
@@ -202,7 +203,8 @@ def check_scene_run(cfg: TrainConfig) -> None:
                          "pucks only")
     if cfg.reward == "vice":
         raise ValueError(f"the vice reward fits its goal classifier on zsrm's scripted episodes, which your own "
-                         f"scene ({cfg.scene}) has not; train with the oracle, base, curiosity or random reward")
+                         f"scene ({cfg.scene}) has not; train with the oracle, zsrm (--reward-model), base, curiosity or "
+                         "random reward")
     if cfg.choice:
         raise ValueError("--choice adds a block to zsrm's tabletop; your own scene holds the objects its env holds")
     if cfg.start not in ("auto", "above"):

@@ -90,13 +90,14 @@ class PretrainConfig:
     init: str = ""  # start from this scene VLM folder (e.g. zsrm/vlm/weights/scene), not random weights; needs --out
     freeze_trunk: bool = False  # --init's image trunk (to the Grad-CAM layer) stays bit-identical; the rest learns
     scene: str = ""  # your own scene (module:Class or a registered id): learn its objects' names from its renders, not zsrm's; needs --out
+    zoom: float = 0.0  # with --scene: share of each batch shown as zoomed views (a window of a render, captioned with what the window shows: presence, never where)
 
     # Settings that define the run: a checkpoint made with others cannot be resumed.
     IDENTITY = ("arch", "scenes", "shard_size", "image_size", "steps", "batch_size", "lr", "weight_decay",
                 "warmup_steps", "seed")
     # Settings added after the shipped VLM was trained: part of the identity only when changed,
     # so that its checkpoints and config still match.
-    ADDED = {"pendulum_scenes": 0, "box_scenes": 0, "init": "", "freeze_trunk": False, "scene": ""}
+    ADDED = {"pendulum_scenes": 0, "box_scenes": 0, "init": "", "freeze_trunk": False, "scene": "", "zoom": 0.0}
 
     def identity(self) -> dict:
         d = {k: getattr(self, k) for k in self.IDENTITY}
@@ -111,6 +112,10 @@ def check_config(cfg: PretrainConfig) -> None:
     for name in ("pendulum_scenes", "box_scenes"):
         if getattr(cfg, name) < 0:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(cfg, name)}")
+    if not 0.0 <= cfg.zoom <= 1.0:
+        raise ValueError(f"--zoom is a share of each batch, in [0, 1], got {cfg.zoom}")
+    if cfg.zoom and not cfg.scene:
+        raise ValueError("--zoom is for your own scene's renders (--scene)")
     if cfg.scene and (cfg.pendulum_scenes or cfg.box_scenes):
         raise ValueError("--scene learns your own scene's objects; --pendulum-scenes and --box-scenes are zsrm's scenes")
     if cfg.freeze_trunk and not cfg.init:
@@ -181,16 +186,60 @@ def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfi
     if pendulum is not None or box is not None:
         return _mixed_batch(data, train_rows, rng, cfg, pendulum, box)
     rows = train_rows[rng.choice(len(train_rows), min(cfg.batch_size, len(train_rows)), replace=False)]
-    if objects is not None:
+    if objects is not None and cfg.zoom > 0:
+        images, captions = _zoomed_batch(data, rows, rng, cfg, objects)
+    elif objects is not None:
         captions = [phrases_caption(visible_names(data["visible"][r], objects, cfg.image_size), rng) for r in rows]
     else:
         captions = [presence_caption(visible_colours(data["visible"][r], cfg.image_size), SHAPES[data["shape"][r]],
                                      rng) for r in rows]
-    images = data["images"][rows]
+    if objects is None or cfg.zoom <= 0:
+        images = data["images"][rows]
     # Mirror half the images: presence does not depend on left and right, captions never say where.
     flip = rng.random(len(rows)) < 0.5
     images = np.where(flip[:, None, None, None], images[:, :, ::-1], images)
     return np.ascontiguousarray(images), captions
+
+
+ZOOM_SIDES = (0.35, 0.7)  # a zoomed view's side, as a share of the render's
+
+
+def zoomed_view(image: np.ndarray, mask: np.ndarray, rng: np.random.Generator, threshold: int):
+    """A window of ``image`` (side drawn from ``ZOOM_SIDES``) scaled back to its size, and which
+    objects it shows (``mask``: each pixel's object, 1-based, 0 for none): those with at least
+    ``threshold`` pixels in the window. None when an object is cut to fewer (it would be seen
+    and not named) or nothing is shown, after a few draws."""
+    size = image.shape[0]
+    for _ in range(8):
+        side = int(round(size * rng.uniform(*ZOOM_SIDES)))
+        y, x = (int(v) for v in rng.integers(0, size - side + 1, 2))
+        counts = np.bincount(mask[y:y + side, x:x + side].ravel(), minlength=mask.max() + 1)[1:]
+        shown = counts >= threshold
+        if shown.any() and not ((counts > 0) & ~shown).any():
+            idx = (np.arange(size) * side // size)
+            return image[y + idx[:, None], x + idx[None, :]], np.flatnonzero(shown)
+    return None
+
+
+def _zoomed_batch(data: dict, rows: np.ndarray, rng: np.random.Generator, cfg: PretrainConfig, objects):
+    """An own scene's batch with a ``cfg.zoom`` share of zoomed views: the same presence captions,
+    of a window of the render (a narrower camera), never saying where in it."""
+    from zsrm.vlm.presence import min_visible_pixels
+
+    if "masks" not in data:
+        raise ValueError("zoomed views need the renders' object masks: render them with masks (zsrm pretrain-vlm "
+                         "--scene --zoom renders them; use another --workdir for renders made without)")
+    images, captions = [], []
+    for r in rows:
+        view = zoomed_view(data["images"][r], data["masks"][r], rng, min_visible_pixels(cfg.image_size)) \
+            if rng.random() < cfg.zoom else None
+        if view is None:
+            images.append(data["images"][r])
+            captions.append(phrases_caption(visible_names(data["visible"][r], objects, cfg.image_size), rng))
+        else:
+            images.append(view[0])
+            captions.append(phrases_caption([objects[j] for j in view[1]], rng))
+    return np.stack(images), captions
 
 
 def _mixed_batch(data: dict, train_rows: np.ndarray, rng: np.random.Generator, cfg: PretrainConfig,
