@@ -310,8 +310,11 @@ def test_no_zsrm_module_imports_the_example():
 
 def test_no_zsrm_source_names_the_examples_objects():
     # the phrases, the env's own names ("bowl" alone is a word zsrm's goal paraphrases may use)
+    from examples.slate_scene.adapter import BODIES as SLATE_BODIES
+
     words = [*BODIES, *(b for b in BODIES.values() if "_" in b), "examples.own_scene", "OwnScene", "cam_front",
-             "cam_side", "cam_high"]
+             "cam_side", "cam_high", *SLATE_BODIES, *SLATE_BODIES.values(), "examples.slate_scene", "SlateScene",
+             "view_front", "view_left", "view_oblique"]
     files = [p for p in (ROOT / "zsrm").rglob("*") if p.is_file() and p.suffix in (".py", ".json", ".xml", ".md")]
     bad = [f"{p.relative_to(ROOT)}: {w!r}" for p in files for w in words if w in p.read_text(errors="ignore")]
     assert not bad, bad

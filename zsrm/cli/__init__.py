@@ -32,7 +32,7 @@ COMMANDS = {
     "reward-data": build.RewardData,
     "finetune": build.Finetune,
     "eval-reward": measure.EvalReward,
-    "own-scene": own_scene.OwnSceneChain,
+    "own-scene": own_scene.SceneChain,
     "eval-goals": goals.EvalGoals,
     "train": learn.Train,
     "rollout": learn.Rollout,

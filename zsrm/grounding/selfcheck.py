@@ -35,14 +35,16 @@ def disc_mask(size: int, centres: np.ndarray, radius: float) -> np.ndarray:
 
 
 def masking_agreement(vlm, gradcam: GradCAM, images: np.ndarray, present: np.ndarray, phrases: Sequence[str],
-                      radius: float, batch_size: int = 256) -> dict:
+                      radius, batch_size: int = 256) -> dict:
     """Per phrase, the share of (image, phrase) where hiding the phrase's own Grad-CAM point lowers
     its score most (module docstring). ``present`` (n, k) bool: which of ``phrases`` each image
-    holds (visible); only images with two or more are used. Returns ``{"agreement": {phrase:
-    share}, "cases": {phrase: n}, "min": the lowest share}``."""
+    holds (visible); only images with two or more are used. ``radius``: the hiding disc's, in
+    pixels, one for all or one per phrase (about each object's own size). Returns
+    ``{"agreement": {phrase: share}, "cases": {phrase: n}, "min": the lowest share}``."""
     images, present = np.asarray(images), np.asarray(present, bool)
     rows = np.flatnonzero(present.sum(axis=1) >= 2)
     k, size = len(phrases), images.shape[1]
+    radius = np.broadcast_to(np.asarray(radius, np.float64), (k,))
     agree, cases = np.zeros(k), np.zeros(k)
     if len(rows):
         xy = gradcam(images[rows], list(phrases)).xy  # (m, k, 2); NaN where not found
@@ -55,7 +57,7 @@ def masking_agreement(vlm, gradcam: GradCAM, images: np.ndarray, present: np.nda
                 if np.isnan(xy[i, j]).any():
                     continue
                 img = images[r].copy()
-                img[disc_mask(size, xy[i, j][None], radius)[0]] = fill
+                img[disc_mask(size, xy[i, j][None], radius[j])[0]] = fill
                 masked.append(img)
                 index.append((i, j))
         scores = np.full((len(rows), k, k), np.nan)  # [image, hidden phrase, scored phrase]

@@ -1,7 +1,7 @@
 """``zsrm own-scene``: the whole chain on a scene zsrm was not built for, in one command.
 
-    zsrm own-scene --scene examples.slate_scene.adapter:SlateScene --out runs/slate \\
-        --goals "a white sphere on the left of a black box" "a teal capsule behind a yellow ellipsoid"
+    zsrm own-scene --scene mylab.scenes:Mugs --out runs/mugs \\
+        --goals "a red mug on the left of a blue plate" "a red mug behind a green bowl"
 
 Stages, each a zsrm command run in this process, skipped when its output is there (a killed run
 loses no finished stage), each with one progress line:
@@ -48,10 +48,11 @@ from zsrm.common import files
 SUMMARY, REPORT, FIGURE = "summary.json", "report.md", "localisation.png"
 PRESENCE_FLOOR = 0.95  # eval-vlm's --min-auroc
 CHECK_IMAGES = 300  # held-out renders of each VLM check
-# Lowest per-object masking agreement of a VLM whose Grad-CAM finds every object (slate scene,
-# 5 seeds: those that localised every object within half its width read 0.95-0.97, the others
-# 0.0-0.79: docs/own-scene.md).
-MASKING_FLOOR = 0.9
+# The lowest per-object masking agreement a VLM must reach. Calibrated on 10 stand-in VLMs of two
+# scenes (probes/vlm_seed_probe.py, results/side/scenes/): the 5 that localised every object within
+# half its width read 0.86-0.97, the 5 that did not 0.00-0.81. A thin margin: the evaluation gates,
+# against the true pixels, have the last word.
+MASKING_FLOOR = 0.85
 
 
 @dataclass
@@ -62,7 +63,7 @@ class Gate:
 
 
 @dataclass
-class OwnSceneChain:
+class SceneChain:
     """Run the whole own-scene chain on an adapter and its goals (resumable; a report at the end).
 
     Each stage is a zsrm command run in this process and skipped when its output is there; gates
@@ -130,7 +131,7 @@ class OwnSceneChain:
                 print(f"{head} ...", flush=True)
                 t = time.time()
                 run()
-                seconds[name] = round(time.time() - t, 1)
+                seconds[name] = round(time.time() - t, 1) if name != "vlm" else vlm_seconds(out, self.vlm_seeds)
                 files.write_json(seconds_file, seconds, indent=1)
                 print(f"{head}: done in {seconds[name]:.0f} s", flush=True)
             gates += self.gates_after(name, out)
@@ -231,14 +232,17 @@ class OwnSceneChain:
             folder = out / f"vlm-seed{seed}"
             if not (folder / "config.json").is_file():
                 print(f"  pretrain-vlm seed {seed} ...", flush=True)
+                t = time.time()
                 PretrainVlm(scene=self.scene, out=str(folder), workdir=str(out / f"pretrain-seed{seed}"), arch=self.arch,
                             scenes=self.pretrain_scenes, shard_size=100, steps=self.pretrain_steps, batch_size=64,
                             checkpoint_every=500, warmup_steps=50, threads=self.threads, seed=seed, zoom=self.zoom,
                             quiet=self.quiet).run()
+                files.write_json(folder / "seconds.json", {"pretrain": round(time.time() - t, 1)})
             path = folder / "check.json"
             if not path.is_file():
-                files.write_json(path, check_vlm(folder, self.scene, n_images=CHECK_IMAGES, progress=not self.quiet),
-                                 indent=1)
+                t = time.time()
+                check = check_vlm(folder, self.scene, n_images=CHECK_IMAGES, progress=not self.quiet)
+                files.write_json(path, {**check, "seconds": round(time.time() - t, 1)}, indent=1)
             checks[seed] = files.read_json(path, "a VLM check")
             worst = checks[seed]["masking"]["min"]
             print(f"  seed {seed}: lowest masking agreement {worst if worst is None else round(worst, 3)}, lowest "
@@ -353,10 +357,25 @@ def check_vlm(folder: Path, scene: str, n_images: int = 300, seed: int = 0, prog
     if cfg.locate == "fine":
         grad.set_centres(grad.calibrate(first, fine=True), (size, size), fine=True)
     present = renders["visible"] >= min_visible_pixels(size)
-    radius = float(np.sqrt(np.median(renders["visible"][present]) / np.pi)) if present.any() else 2.0
+    # each object hidden under a disc of its own median visible area (segmentation counts: which
+    # pixels a render shows of it, read here for the disc's size only)
+    radius = np.array([np.sqrt(np.median(renders["visible"][present[:, j], j]) / np.pi) if present[:, j].any() else 2.0
+                       for j in range(len(adapter.objects))])
     masking = masking_agreement(vlm, grad, renders["images"], present, adapter.objects, radius)
     return {"presence_auroc": {k.split(".", 1)[1]: v for k, v in presence.items() if k.startswith("auroc.")},
-            "presence_counts": presence["meta"]["counts"], "masking": masking, "mask_radius_px": round(radius, 2)}
+            "presence_counts": presence["meta"]["counts"], "masking": masking,
+            "mask_radius_px": {o: round(float(r), 2) for o, r in zip(adapter.objects, radius)}}
+
+
+def vlm_seconds(out: Path, seeds) -> float:
+    """The vlm stage's time: each tried seed's pretraining and check, as each recorded it."""
+    total = 0.0
+    for seed in seeds:
+        folder = out / f"vlm-seed{seed}"
+        for name, key in (("seconds.json", "pretrain"), ("check.json", "seconds")):
+            if (folder / name).is_file():
+                total += files.read_json(folder / name, "a VLM's times").get(key, 0.0)
+    return round(total, 1)
 
 
 def vlm_gates(vlm: dict) -> list[Gate]:
@@ -541,5 +560,5 @@ def plot_localisation(loc: dict, path: Path) -> bool:
     return True
 
 
-__all__ = ["Gate", "OwnSceneChain", "check_vlm", "labeler_gates", "localisation_gates", "object_localisation",
+__all__ = ["Gate", "SceneChain", "check_vlm", "labeler_gates", "localisation_gates", "object_localisation",
            "object_widths", "reward_gates", "vlm_gates", "write_report"]

@@ -123,7 +123,22 @@ def demo_result(log: list[dict], wall_s: float, task: str) -> dict:
             "random_policy_mean": rand["final_mean"], "random_policy_se": rand["final_se"],
             "zsrm_policy_env_steps": trained["env_steps"], "episodes": trained["final_episodes"],
             "stage_seconds": {e["stage"]: e["seconds"] for e in log},
-            "stages_cached": [e["stage"] for e in log if e.get("cached")]}
+            "stages_cached": [e["stage"] for e in log if e.get("cached")],
+            "expected_range": expected_range(task)}
+
+
+def expected_range(task: str, reward: str = "zsrm", learning: Path = RESULTS / "rl" / "learning.json") -> dict | None:
+    """The spread of the committed seeds of ``task`` with ``reward`` (results/rl/learning.json): float
+    results move across CPUs, so another machine's run lands somewhere in it, not on one number."""
+    if not learning.is_file():
+        return None
+    cell = json.loads(learning.read_text()).get(task, {}).get(reward)
+    if not cell or not cell.get("final_per_seed"):
+        return None
+    finals = cell["final_per_seed"]
+    return {"min": round(min(finals), 1), "max": round(max(finals), 1), "seeds": len(finals),
+            "file": str(learning), "why": "float results move across CPUs (the same seed gave 69.8 on one x86_64 "
+                                          "machine, 56.1 on another); on one machine a rerun is identical"}
 
 
 def demo_section(report: Report, result: dict, workdir: Path):
@@ -143,6 +158,12 @@ def demo_section(report: Report, result: dict, workdir: Path):
     report.text(f"Learning signal: the trained policy is {gap:+.1f} against random; "
                 + ("more than" if gap > margin else "NOT more than") +
                 f" the two standard errors combined ({margin:.1f}).")
+    spread = result.get("expected_range")
+    if spread:
+        report.text(f"Expect a number in a range, not this one: float results move across CPUs, and the same seed "
+                    f"ends elsewhere on another machine. The committed runs of this task and reward "
+                    f"({spread['seeds']} seeds, {spread['file']}) end between {spread['min']:.1f} and "
+                    f"{spread['max']:.1f}; on one machine a rerun gives the same number.")
     summary = json.loads((workdir / "policy_zsrm" / "summary.json").read_text())
     rand = json.loads((workdir / "policy_random" / "summary.json").read_text())
     curves = {task: {"zsrm": {"curve": summary["curve"], "seeds": 1,

@@ -30,11 +30,17 @@ class Figure:
     name: str  # what is measured, in a few words
     file: str  # relative to results/
     value: Callable[[dict], str]  # the value as written, from the file's JSON
-    command: str  # the command that writes the file
+    command: str | Callable[[dict], str]  # the command that writes the file (or how to read it from the file)
     headline: bool = True  # also a row of README.md's headline table
 
     def row(self, data: dict, link_prefix: str = "") -> str:
-        return f"| {self.name} | {self.value(data)} | [`{self.file}`]({link_prefix}{self.file}) | `{self.command}` |"
+        command = self.command(data) if callable(self.command) else self.command
+        return f"| {self.name} | {self.value(data)} | [`{self.file}`]({link_prefix}{self.file}) | `{command}` |"
+
+
+def _recorded_command(d: dict) -> str:
+    """The command a result file records (its ``meta.command``): zsrm's source names no example scene."""
+    return d["meta"]["command"]
 
 
 def _pm(entry: dict, mean: str = "final_mean", se: str = "final_se") -> str:
@@ -60,6 +66,16 @@ def _own_scene(d: dict) -> str:
                f"{ppo['random']['mean']:.1f} (the oracle learns little: docs/own-scene.md)" if ppo
                else "; PPO not run (the oracle does not learn its goals yet)")
     return f"labeler {labeler}; reward {rewards}{learned}"
+
+
+def _scene_chain(d: dict) -> str:
+    """A ``zsrm own-scene`` summary: labeler, the worst localisation against half a width, reward."""
+    labeler = ", ".join(f"{rel.replace('_', ' ')} {f1:.2f}" for rel, f1 in d["labeler_f1"].items())
+    worst = max((c["median_error_px"] / c["half_width_px"], obj, role) for obj, cells in d["localisation"].items()
+                for role, c in cells.items() if c["median_error_px"] is not None)
+    rewards = "; ".join(f"{v['zsrm']:.2f} / {v['base']:.2f}" for v in d["reward_f1"].values())
+    return (f"labeler {labeler}; worst localisation {worst[0]:.2f} of half a width ({worst[1]}, {worst[2]}); "
+            f"reward zsrm / base {rewards}; usable: {'yes' if d['usable'] else 'no'}")
 
 
 def _figure6(d: dict) -> str:
@@ -153,6 +169,11 @@ FIGURES = [
     Figure("Full model on an own scene (examples/own_scene): labeler F1 for the goals' relations; binarised reward "
            "F1 on three goals, zsrm / base; PPO on one goal, 300k steps, 3 seeds",
            "own_scene.json", _own_scene, "python benchmarks/own_scene.py"),
+    Figure("A scene written from scratch, from its XML alone (examples/slate_scene), through `zsrm own-scene`: "
+           "labeler F1 for the goals' relations; the worst object's median Grad-CAM error over half its width; "
+           "binarised reward F1 on three goals", "scenes/slate_scene.json", _scene_chain, _recorded_command),
+    Figure("The first example (examples/own_scene) through `zsrm own-scene`", "scenes/own_scene.json", _scene_chain,
+           _recorded_command, headline=False),
     Figure("Learning from pixels, default configuration, final oracle episode reward", "rl/learning.json",
            _learning, LEARNING + " --out results/rl/learning.json"),
     Figure("Table 2 in colour frames (the paper's setting): the paper's three, behaviour cloning",
@@ -245,6 +266,8 @@ SIDE = [
      "word, not by the start layout alone"),
     ("side/multitask/v1/**", "Table 2 as measured before 2026-12-05, from the v1 task policies (200k steps, action "
      "repeat 2; placing at 1 to 49): the table, distillation seeds 1-3, choice scenes and their task policies"),
+    ("side/scenes/*", "the stand-in VLM's pretraining seeds with and without zoomed views on the slate scene "
+     "(probes/vlm_seed_probe.py): the masking check against each object's true localisation error"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
      "example scene (probes/own_scene_starts.py): why its goals train in compact scenes with 1 cm steps"),
 ]
@@ -262,7 +285,7 @@ OTHER = [
     ("multitask/trials/*", "their trial summaries, so a rerun of the sweep skips them"),
     ("multitask/table2_colour.*", "Table 2 in colour frames as CSV, markdown and a bar plot"),
     ("own_scene/*", "the own-scene stages' measurements (the labeler, the reward, each stage's seconds), written by "
-     "benchmarks/own_scene.py"),
+     "benchmarks/own_scene.py before it became a call of zsrm own-scene (2026-12-05)"),
     ("own_scene/pilots/**", "runs on the example's goals in settings that did not learn: every object anywhere "
      "(300k steps); compact scenes with 2 cm pusher steps (500k) (docs/own-scene.md, step 12)"),
     ("own_scene/trials/*", "the trial summaries of benchmarks/own_scene.py's PPO sweep (learning.json, .png)"),
