@@ -42,16 +42,31 @@ results: setup
 	$(PY) benchmarks/reward_speed.py --vlm runs/zsrm/vlm --student runs/zsrm/student --out results/reward_speed.json
 	OMP_NUM_THREADS=1 $(PY) benchmarks/robustness.py --out results/robustness.json
 	# Own scenes through the one command (about 30 min each on one core): a scene written from scratch, from its
-	# XML alone, and the first example; then the stand-in VLM's seeds against the masking check (side)
+	# XML alone, and the first example; beside them (side) the same without zoomed views (the slate scene then
+	# fails its localisation gate on one object) and the example with its first VLM seed alone; then the stand-in
+	# VLM's seeds against the masking check (side)
 	$(VENV)/bin/zsrm own-scene --scene examples.slate_scene.adapter:SlateScene --goals \
 		"a white sphere on the left of a black box" "a teal capsule behind a yellow ellipsoid" \
-		"a yellow ellipsoid on the right of a teal capsule" --out runs/scenes/slate --results results/scenes/slate_scene.json
+		"a yellow ellipsoid on the right of a teal capsule" --zoom 0.5 --out runs/scenes/slate-zoom \
+		--results results/scenes/slate_scene.json
 	$(VENV)/bin/zsrm own-scene --scene examples.own_scene.adapter:OwnScene --goals \
 		"a red cylinder on the right of a purple cylinder" "an orange cylinder on the left of a red cylinder" \
 		"a red cylinder behind a purple cylinder" --out runs/scenes/own_scene --results results/scenes/own_scene.json
-	$(PY) probes/vlm_seed_probe.py --scene examples.slate_scene.adapter:SlateScene --seeds 0 1 2 --zooms 0 0.5 \
+	-$(VENV)/bin/zsrm own-scene --scene examples.slate_scene.adapter:SlateScene --goals \
+		"a white sphere on the left of a black box" "a teal capsule behind a yellow ellipsoid" \
+		"a yellow ellipsoid on the right of a teal capsule" --zoom 0.0 --out runs/scenes/slate \
+		--results results/side/scenes/slate_scene_nozoom.json
+	$(VENV)/bin/zsrm own-scene --scene examples.own_scene.adapter:OwnScene --goals \
+		"a red cylinder on the right of a purple cylinder" "an orange cylinder on the left of a red cylinder" \
+		"a red cylinder behind a purple cylinder" --zoom 0.0 --out runs/scenes/own_scene-nozoom \
+		--results results/side/scenes/own_scene_nozoom.json
+	$(VENV)/bin/zsrm own-scene --scene examples.own_scene.adapter:OwnScene --goals \
+		"a red cylinder on the right of a purple cylinder" "an orange cylinder on the left of a red cylinder" \
+		"a red cylinder behind a purple cylinder" --zoom 0.0 --vlm-seeds 0 --out runs/scenes/own_scene-seed0 \
+		--results results/side/scenes/own_scene_seed0.json
+	$(PY) probes/vlm_seed_probe.py --scene examples.slate_scene.adapter:SlateScene --seeds 0 1 2 3 --zooms 0 0.5 \
 		--out results/side/scenes/slate_vlm_seeds.json
-	$(PY) probes/vlm_seed_probe.py --scene examples.own_scene.adapter:OwnScene --seeds 0 1 2 3 --zooms 0.5 \
+	$(PY) probes/vlm_seed_probe.py --scene examples.own_scene.adapter:OwnScene --seeds 0 1 2 3 --zooms 0 0.5 \
 		--out results/side/scenes/own_scene_vlm_seeds.json
 	# Training speed: each lever from v1 to the default, part by part; then the whole train loop against v1
 	OMP_NUM_THREADS=1 $(PY) benchmarks/train_profile.py --out results/rl/profile.json

@@ -330,3 +330,30 @@ def test_the_one_command_refuses_goals_the_scene_cannot_read(tmp_path, capsys):
     assert main(["own-scene", "--scene", SPEC, "--goals", "a red mug on the left of a black box",
                  "--out", str(tmp_path / "x")]) == 2
     assert "unknown object 'red mug'" in capsys.readouterr().err
+
+
+def test_a_rerun_with_other_data_settings_in_the_same_folder_is_one_line(tmp_path, capsys):
+    from zsrm.pipeline.own_scene import SceneChain
+
+    out = tmp_path / "chain"
+    SceneChain(scene=SPEC, goals=tuple(GOALS), out=str(out), dry_run=True).check_settings(out)
+    assert not (out / "chain.json").exists()  # a dry run writes nothing
+    SceneChain(scene=SPEC, goals=tuple(GOALS), out=str(out)).check_settings(out)
+    assert main(["own-scene", "--scene", SPEC, "--goals", *GOALS, "--out", str(out), "--images", "10",
+                 "--dry-run"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "holds a chain run with other settings (images: 4000 there, 10 here)" in err
+
+
+def test_the_recorded_command_reruns_the_same_chain():
+    from zsrm.cli import build_parser
+    from zsrm.cli.options import from_namespace
+    from zsrm.pipeline.own_scene import SceneChain
+
+    chain = SceneChain(scene=SPEC, goals=tuple(GOALS), out="runs/x", results="r.json", vlm_seeds=(0, 1), zoom=0.5)
+    words = chain.command().split(" ", 1)[1]
+    import shlex
+
+    again = from_namespace(SceneChain, build_parser().parse_args(shlex.split(words)))
+    assert again.command() == chain.command() and again.goals == chain.goals and again.zoom == 0.5
+    assert chain.command().startswith(f"zsrm own-scene --scene {SPEC} --goals ")

@@ -266,8 +266,14 @@ SIDE = [
      "word, not by the start layout alone"),
     ("side/multitask/v1/**", "Table 2 as measured before 2026-12-05, from the v1 task policies (200k steps, action "
      "repeat 2; placing at 1 to 49): the table, distillation seeds 1-3, choice scenes and their task policies"),
-    ("side/scenes/*", "the stand-in VLM's pretraining seeds with and without zoomed views on the slate scene "
-     "(probes/vlm_seed_probe.py): the masking check against each object's true localisation error"),
+    ("side/scenes/*_vlm_seeds.json", "the stand-in VLM's pretraining seeds with and without zoomed views on both "
+     "example scenes (probes/vlm_seed_probe.py): the masking check against each object's true localisation error"),
+    ("side/scenes/slate_scene_nozoom.json", "the slate scene through zsrm own-scene without zoomed views (--zoom 0, "
+     "the default before 2026-12-05): not usable, the teal capsule's Grad-CAM point sits 2.6 px from it on the left "
+     "camera, over half its width (2.1 px)"),
+    ("side/scenes/own_scene_nozoom.json", "the first example through zsrm own-scene without zoomed views"),
+    ("side/scenes/own_scene_seed0.json", "the first example through zsrm own-scene with seed 0 alone and no zoomed "
+     "views: the VLM results/own_scene.json was made with"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
      "example scene (probes/own_scene_starts.py): why its goals train in compact scenes with 1 cm steps"),
 ]
