@@ -210,6 +210,8 @@ def writer_commands(tmp_path, out, dataset) -> dict[str, list[str]]:
         "eval-multitask": ["eval-multitask", "--out", str(out / "table2.json")],
         "eval-goals": ["eval-goals", "--out", str(out / "goals.json")],
         "results-page": ["results-page", "--results", str(out), "--readme", str(out / "README.md")],
+        "own-scene": ["own-scene", "--scene", "examples.slate_scene.adapter:SlateScene", "--goals",
+                      "a white sphere on the left of a black box", "--out", str(out)],
     }
 
 
@@ -223,7 +225,7 @@ def test_every_writing_command_is_listed():
                                      "finetune", "eval-grounding", "reward-data", "pretrain-vlm", "eval-vlm",
                                      "eval-pose", "demo", "train", "rollout", "sweep", "plot", "reproduce",
                                      "multitask-policies", "multitask-rollouts", "distill", "eval-multitask",
-                                     "eval-goals", "results-page"])
+                                     "eval-goals", "results-page", "own-scene"])
 def test_an_unwritable_output_is_one_line_before_any_work(command, dataset, tmp_path, capsys, monkeypatch):
     def no_work(*args, **kwargs):
         raise AssertionError("work started before the output was checked")

@@ -108,6 +108,8 @@ class SceneChain:
         if not self.vlm_seeds:
             raise ValueError("give at least one --vlm-seeds")
         out = files.check_writable(self.out, folder=True)
+        if self.results:
+            files.check_writable(self.results)
         stages = self.stages(out)
         if self.until and self.until not in [s[0] for s in stages]:
             raise ValueError(f"--until {self.until!r}: the stages are {', '.join(s[0] for s in stages)}")
