@@ -114,10 +114,28 @@ class SceneChain:
         if self.until and self.until not in [s[0] for s in stages]:
             raise ValueError(f"--until {self.until!r}: the stages are {', '.join(s[0] for s in stages)}")
         self.check_settings(out)
+        torch_threads(self.threads)
+        seconds, gates = self.run_stages(out, stages)
+        if self.dry_run:
+            return 0
+        summary = self.summary(out, adapter, seconds, gates)
+        files.write_json(out / SUMMARY, summary, indent=1)
+        if self.results:
+            files.write_json(self.results, summary, indent=1)
+        write_report(out, summary)
+        failed = sum(not g.ok for g in gates)
+        if failed:
+            print(f"the chain is not usable as it stands: {failed} gate{'s' if failed > 1 else ''} failed (above)",
+                  file=sys.stderr)
+        print(f"report: {out / REPORT}" + (f"; summary: {self.results}" if self.results else ""))
+        return 1 if failed else 0
+
+    def run_stages(self, out: Path, stages) -> tuple[dict, list[Gate]]:
+        """Each stage not done yet, its time, and the gates after it (stopping at a failed one
+        unless ``keep_going``)."""
         seconds_file = out / "stage_seconds.json"
         seconds = files.read_json(seconds_file, "the stage times") if seconds_file.is_file() else {}
         gates: list[Gate] = []
-        torch_threads(self.threads)
         for i, (name, run, done) in enumerate(stages, 1):
             head = f"[{i}/{len(stages)}] {name}"
             if self.dry_run:
@@ -140,22 +158,9 @@ class SceneChain:
                 print(f"{'ok' if g.ok else 'FAILED'} [{g.stage}] {g.line}", file=sys.stdout if g.ok else sys.stderr,
                       flush=True)
             gates += new
-            failed = [g for g in gates if not g.ok]
-            if (failed and not self.keep_going) or name == self.until:
+            if (any(not g.ok for g in gates) and not self.keep_going) or name == self.until:
                 break
-        if self.dry_run:
-            return 0
-        summary = self.summary(out, adapter, seconds, gates)
-        files.write_json(out / SUMMARY, summary, indent=1)
-        if self.results:
-            files.write_json(self.results, summary, indent=1)
-        write_report(out, summary)
-        failed = sum(not g.ok for g in gates)
-        if failed:
-            print(f"the chain is not usable as it stands: {failed} gate{'s' if failed > 1 else ''} failed (above)",
-                  file=sys.stderr)
-        print(f"report: {out / REPORT}" + (f"; summary: {self.results}" if self.results else ""))
-        return 1 if any(not g.ok for g in gates) else 0
+        return seconds, gates
 
     def command(self) -> str:
         """The command line of these options (those not at their defaults), to rerun it."""

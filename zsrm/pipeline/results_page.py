@@ -269,7 +269,7 @@ SIDE = [
     ("side/scenes/*_vlm_seeds.json", "the stand-in VLM's pretraining seeds with and without zoomed views on both "
      "example scenes (probes/vlm_seed_probe.py): the masking check against each object's true localisation error"),
     ("side/scenes/slate_scene_nozoom.json", "the slate scene through zsrm own-scene without zoomed views (--zoom 0, "
-     "the default before 2026-12-05): not usable, the teal capsule's Grad-CAM point sits 2.6 px from it on the left "
+     "the default before 2026-12-05): not usable, one object's Grad-CAM point sits 2.6 px from it on the left "
      "camera, over half its width (2.1 px)"),
     ("side/scenes/own_scene_nozoom.json", "the first example through zsrm own-scene without zoomed views"),
     ("side/scenes/own_scene_seed0.json", "the first example through zsrm own-scene with seed 0 alone and no zoomed "
