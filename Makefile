@@ -41,7 +41,7 @@ results: setup
 		--out results/reward_eval.json
 	$(PY) benchmarks/reward_speed.py --vlm runs/zsrm/vlm --student runs/zsrm/student --out results/reward_speed.json
 	OMP_NUM_THREADS=1 $(PY) benchmarks/robustness.py --out results/robustness.json
-	# Own scenes through the one command (about 30 min each on one core): a scene written from scratch, from its
+	# Own scenes through the one command (about 20 min each on one core): a scene written from scratch, from its
 	# XML alone, and the first example; beside them (side) the same without zoomed views (the slate scene then
 	# fails its localisation gate on one object) and the example with its first VLM seed alone; then the stand-in
 	# VLM's seeds against the masking check (side)
