@@ -73,11 +73,6 @@ class _Segmenter:
                 out[np.isin(ids, self._subtree(self._body_of(positions[o])))] = j + 1
         return out
 
-    def visible(self, camera: str, positions: dict[str, np.ndarray], objects: tuple[str, ...]) -> np.ndarray:
-        """Pixels of each of ``objects`` seen by ``camera`` (0 for those not in ``positions``)."""
-        mask = self.mask(camera, positions, objects)
-        return np.bincount(mask.ravel(), minlength=len(objects) + 1)[1:]
-
     def close(self):
         self.renderer.close()
 
@@ -136,6 +131,12 @@ def _render_one(adapter: SceneAdapter, env, seg: _Segmenter, plan: dict, out: di
     if "masks" in out:
         out["masks"][rows] = role_masks
     out["in_scene"][rows] = [o in positions for o in objects]
+
+
+def disc_radius(areas) -> float:
+    """The radius of a disc of the median of ``areas`` (an object's visible pixels in renders that
+    show it): its size in pixels, whatever its shape."""
+    return float(np.sqrt(np.median(areas) / np.pi))
 
 
 def check_captions_vary(renders: dict, adapter: SceneAdapter, image_size: int = 64) -> None:

@@ -1,7 +1,6 @@
 """Gymnasium's InvertedDoublePendulum-v5, observed through rendered pixels only."""
 from __future__ import annotations
 
-
 import gymnasium as gym
 import numpy as np
 

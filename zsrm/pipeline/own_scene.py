@@ -346,7 +346,7 @@ def torch_threads(n: int) -> None:
 def check_vlm(folder: Path, scene: str, n_images: int = 300, seed: int = 0, progress: bool = False) -> dict:
     """A stand-in VLM of an own scene: presence AUROC per object and masking agreement (Grad-CAM
     as zsrm label runs it) on held-out renders; reads which objects each render holds, never where."""
-    from zsrm.data.own_renders import render_own_scenes
+    from zsrm.data.own_renders import disc_radius, render_own_scenes
     from zsrm.envs.adapter import ROLES, load_adapter
     from zsrm.evaluation.vlm_presence import own_presence_eval
     from zsrm.grounding.annotate import LabelConfig
@@ -369,7 +369,7 @@ def check_vlm(folder: Path, scene: str, n_images: int = 300, seed: int = 0, prog
     present = renders["visible"] >= min_visible_pixels(size)
     # each object hidden under a disc of its own median visible area (segmentation counts: which
     # pixels a render shows of it, read here for the disc's size only)
-    radius = np.array([np.sqrt(np.median(renders["visible"][present[:, j], j]) / np.pi) if present[:, j].any() else 2.0
+    radius = np.array([disc_radius(renders["visible"][present[:, j], j]) if present[:, j].any() else 2.0
                        for j in range(len(adapter.objects))])
     masking = masking_agreement(vlm, grad, renders["images"], present, adapter.objects, radius)
     return {"presence_auroc": {k.split(".", 1)[1]: v for k, v in presence.items() if k.startswith("auroc.")},
@@ -396,13 +396,13 @@ def vlm_gates(vlm: dict) -> list[Gate]:
         auroc = check["presence_auroc"][obj]
         if counts["absent"] == 0:
             gates.append(Gate("vlm", False, f"{obj!r} is present in every render: the VLM cannot learn which word "
-                                                  "is it; let scenes hold subsets (bodies, or an env with objects=)"))
+                                            "is it; let scenes hold subsets (bodies, or an env with objects=)"))
         elif auroc is None or not auroc >= PRESENCE_FLOOR:
             gates.append(Gate("vlm", False, f"{obj!r}: presence AUROC {auroc} < {PRESENCE_FLOOR}; try more "
-                                                  "--pretrain-steps or --pretrain-scenes, or --arch default"))
-    worst = check["masking"]["min"]
-    if worst is None or worst < vlm.get("masking_floor", MASKING_FLOOR):
-        low = [o for o, v in check["masking"]["agreement"].items() if v is None or v < vlm.get("masking_floor", MASKING_FLOOR)]
+                                            "--pretrain-steps or --pretrain-scenes, or --arch default"))
+    worst, floor = check["masking"]["min"], vlm.get("masking_floor", MASKING_FLOOR)
+    if worst is None or worst < floor:
+        low = [o for o, v in check["masking"]["agreement"].items() if v is None or v < floor]
         gates.append(Gate("vlm", False, f"no seed's Grad-CAM points at every object: hiding the point of "
                           f"{', '.join(map(repr, low))} rarely lowers its score most (agreement {worst}); try more "
                           "--vlm-seeds, --pretrain-steps or --zoom"))
@@ -415,6 +415,7 @@ def vlm_gates(vlm: dict) -> list[Gate]:
 def object_widths(out: Path, scene: str) -> dict[str, dict[str, float]]:
     """Object -> role -> its width in pixels: the diameter of a disc of its median visible area in
     the first pretraining's renders (MuJoCo segmentation, evaluation only)."""
+    from zsrm.data.own_renders import disc_radius
     from zsrm.envs.adapter import ROLES, load_adapter
     from zsrm.vlm.presence import min_visible_pixels
 
@@ -436,7 +437,7 @@ def object_widths(out: Path, scene: str) -> dict[str, dict[str, float]]:
         for r, role in enumerate(ROLES):
             v = visible[(camera == r) & (visible[:, j] >= min_visible_pixels(size)), j]
             if len(v):
-                out_widths.setdefault(obj, {})[role] = float(2 * np.sqrt(np.median(v) / np.pi))
+                out_widths.setdefault(obj, {})[role] = 2 * disc_radius(v)
     return out_widths
 
 

@@ -188,13 +188,13 @@ def make_batch(data: dict, train_rows: np.ndarray, step: int, cfg: PretrainConfi
     rows = train_rows[rng.choice(len(train_rows), min(cfg.batch_size, len(train_rows)), replace=False)]
     if objects is not None and cfg.zoom > 0:
         images, captions = _zoomed_batch(data, rows, rng, cfg, objects)
-    elif objects is not None:
-        captions = [phrases_caption(visible_names(data["visible"][r], objects, cfg.image_size), rng) for r in rows]
     else:
-        captions = [presence_caption(visible_colours(data["visible"][r], cfg.image_size), SHAPES[data["shape"][r]],
-                                     rng) for r in rows]
-    if objects is None or cfg.zoom <= 0:
         images = data["images"][rows]
+        if objects is not None:
+            captions = [phrases_caption(visible_names(data["visible"][r], objects, cfg.image_size), rng) for r in rows]
+        else:
+            captions = [presence_caption(visible_colours(data["visible"][r], cfg.image_size), SHAPES[data["shape"][r]],
+                                         rng) for r in rows]
     # Mirror half the images: presence does not depend on left and right, captions never say where.
     flip = rng.random(len(rows)) < 0.5
     images = np.where(flip[:, None, None, None], images[:, :, ::-1], images)
