@@ -835,3 +835,19 @@ def test_without_a_table_height_the_tilted_camera_is_read_in_pixels(tmp_path, mo
     tilted = labelers(data, LabelConfig())[SPEC].thresholds["tilted"]
     width_px = data.block_width_px[SPEC]["tilted"]
     assert tilted.close == pytest.approx(0.10 * (0.05 / 0.06) * width_px / 0.05)
+
+
+class TwoObjects(OwnScene):
+    objects = ("red cylinder", "purple cylinder")
+
+
+def test_a_scene_of_two_objects_collects_with_the_default_object_counts(tmp_path):
+    # The defaults ask for 2 to 4 objects a scene; a two-object scene (robosuite's Stack) holds
+    # up to both, where it once stopped the chain's reward-data stage.
+    register_scene("test-two-objects", TwoObjects)
+    cfg = CollectConfig(scene="test-two-objects", images=4, shard_size=4, episode_steps=2, record_every=1)
+    assert (cfg.min_objects, cfg.max_objects) == (2, 2)
+    data = collect(cfg, tmp_path / "two", progress=False)
+    assert data.load()["present"].all()
+    with pytest.raises(ValueError, match="min_objects"):  # zsrm's own scenes still refuse a count they cannot hold
+        CollectConfig(max_objects=5)

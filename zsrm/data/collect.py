@@ -84,6 +84,9 @@ class CollectConfig:
                 raise ValueError(f"unknown {'object' if self.scene else 'colour'} {c!r} to exclude; known: "
                                  f"{', '.join(self.objects)}")
         self.colours = tuple(c for c in self.objects if c not in self.exclude)
+        if self.scene:  # an own scene of fewer objects than the defaults' 2..4: its scenes hold up to all of them
+            self.max_objects = min(self.max_objects, len(self.colours))
+            self.min_objects = min(self.min_objects, self.max_objects)
         if not 1 <= self.min_objects <= self.max_objects <= len(self.colours):
             raise ValueError(f"need 1 <= min_objects <= max_objects <= {len(self.colours)} "
                              f"(colours left: {', '.join(self.colours)}), got {self.min_objects}..{self.max_objects}")
