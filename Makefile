@@ -27,6 +27,7 @@ bench-test: bench-setup
 
 benchmarks: bench-setup
 	OMP_NUM_THREADS=1 $(BENCH_PY) benchmarks/suites.py robosuite
+	OMP_NUM_THREADS=1 $(BENCH_PY) benchmarks/suites.py libero
 
 # Rebuild every figure under results/ (slow: minutes to hours on 2 CPU cores).
 results: setup

@@ -42,6 +42,7 @@ def test_observes_every_role_camera_as_pixels(adapter, env):
 
 
 def test_a_subset_parks_the_other_cube_out_of_sight(adapter):
+    assert adapter.holds_subsets  # else every pretraining caption names both cubes (the chain refuses that)
     env = check_env(adapter, adapter.make_env(tuple(adapter.roles.values()), 32, ("green cube",)))
     try:
         obs, _ = env.reset(seed=1)
@@ -98,3 +99,38 @@ def test_goal_frames_label_each_frame_by_the_predicate(adapter, module):
     assert f["images"].shape == (4, 64, 64, 3)
     assert list(f["source"]) == ["placed", "random", "placed", "random"]
     assert f["success"][f["source"] == "placed"].all()
+    assert np.array_equal(f["images_front"], f["images"]) and f["images_tilted"].shape == (4, 64, 64, 3)
+    assert f["present"].shape == (4, 2) and f["present"].all()
+
+
+# LIBERO: LIBERO-Spatial's scene through the same wrapper, judged by its BDDL predicates.
+LIBERO = "examples.libero.adapter:SpatialBetween"
+BOWL_ON_PLATE, RAMEKIN_ON_PLATE = "a black bowl on top of a plate", "a ramekin on top of a plate"
+
+
+@pytest.fixture(scope="module")
+def libero():
+    adapter = check_adapter(load_adapter(LIBERO))
+    env = check_env(adapter, adapter.make_env(tuple(adapter.roles.values()), 32))
+    yield adapter, importlib.import_module("examples.libero.adapter"), env
+    env.close()
+
+
+def test_libero_scene_observes_roles_and_parks_the_second_bowl(libero):
+    adapter, _, env = libero
+    assert adapter.holds_subsets
+    obs, _ = env.reset(seed=0)
+    assert {k: v.shape for k, v in adapter.observe(obs).items()} == {r: (32, 32, 3) for r in ("front", "left", "tilted")}
+    assert set(adapter.object_positions(env)) == set(adapter.objects)
+    second = env.unwrapped.data.xpos[env.unwrapped.model.body("akita_black_bowl_2_main").id]
+    assert second[0] > 1.5  # parked: "black bowl" names one object only
+
+
+def test_libero_predicate_reads_its_bddl_on(libero):
+    adapter, module, env = libero
+    env.reset(seed=1)
+    module.place_goal(env, BOWL_ON_PLATE, np.random.default_rng(0))
+    rs = env.unwrapped.rs
+    assert module.predicate(env, BOWL_ON_PLATE) and bool(rs._eval_predicate(["on", "akita_black_bowl_1", "plate_1"]))
+    assert rs._check_success()  # LIBERO-Spatial's own goal: (On akita_black_bowl_1 plate_1)
+    assert not module.predicate(env, RAMEKIN_ON_PLATE)

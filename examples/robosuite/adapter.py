@@ -22,6 +22,7 @@ class StackScene(SceneAdapter):
     objects = tuple(OBJECTS)
     bodies = {"red cube": "cubeA_main", "green cube": "cubeB_main"}  # privileged: oracle, evaluation, captions
     cameras = {"front": "table_front", "left": "table_left", "tilted": "table_tilted"}  # added: see env.py
+    subsets = True  # make_env parks the cubes a scene leaves out
     object_width = 0.045
     table_height = 0.8  # robosuite's table_offset z
     env_kwargs = {"p_stack": 0.25}  # exploration: zsrm's layouts (a quarter of them with a cube on the other)

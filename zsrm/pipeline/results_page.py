@@ -78,6 +78,12 @@ def _scene_chain(d: dict) -> str:
             f"reward zsrm / base {rewards}; usable: {'yes' if d['usable'] else 'no'}")
 
 
+def _benchmark(d: dict) -> str:
+    """benchmarks/suites.py: per goal, zsrm / base F1 against the benchmark's own predicate."""
+    return "; ".join(f"\"{g}\" {r['zsrm']['f1']:.2f} / {r['base']['f1']:.2f} (zsrm AUROC {r['zsrm']['auroc']:.2f}; "
+                     f"{r['positives']} of {r['frames']} frames hold)" for g, r in d["reward"].items())
+
+
 def _figure6(d: dict) -> str:
     tasks = ("stack", "place_right", "push_close")
     return "; ".join(f"{t} {_slash((d[t][r]['final_mean'] for r in ('zsrm', 'oracle', 'base')), '{:.1f}')}"
@@ -174,6 +180,12 @@ FIGURES = [
            "binarised reward F1 on three goals", "scenes/slate_scene.json", _scene_chain, _recorded_command),
     Figure("The first example (examples/own_scene) through `zsrm own-scene`", "scenes/own_scene.json", _scene_chain,
            _recorded_command, headline=False),
+    Figure("robosuite Stack (a Panda, two cubes) through `zsrm own-scene`: binarised reward F1, zsrm / base, against "
+           "robosuite's own `_check_success()` (docs/benchmarks.md)", "benchmarks/robosuite.json", _benchmark,
+           _recorded_command),
+    Figure("LIBERO-Spatial (tasks 0 and 6) through `zsrm own-scene`: binarised reward F1, zsrm / base, against "
+           "LIBERO's BDDL `On` predicate (docs/benchmarks.md)", "benchmarks/libero.json", _benchmark,
+           _recorded_command),
     Figure("Learning from pixels, default configuration, final oracle episode reward", "rl/learning.json",
            _learning, LEARNING + " --out results/rl/learning.json"),
     Figure("Table 2 in colour frames (the paper's setting): the paper's three, behaviour cloning",
@@ -272,6 +284,9 @@ SIDE = [
      "the default before 2026-12-05): not usable, one object's Grad-CAM point sits 2.6 px from it on the left "
      "camera, over half its width (2.1 px)"),
     ("side/scenes/own_scene_nozoom.json", "the first example through zsrm own-scene without zoomed views"),
+    ("side/scenes/own_scene_8k_images.json", "the first example through zsrm own-scene with 8000 exploration "
+     "images and 4000 student steps (the shipped student's recipe; its VLM stage copied from the default run, so "
+     "its wall time leaves that stage out): not better than the default on the left-of goal"),
     ("side/scenes/own_scene_seed0.json", "the first example through zsrm own-scene with seed 0 alone and no zoomed "
      "views: the VLM results/own_scene.json was made with"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "

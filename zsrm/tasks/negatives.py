@@ -81,13 +81,15 @@ def read_caption(caption: str) -> "Task | SceneGoal":
     :func:`~zsrm.tasks.scene_goals.parse_scene_goal` with the scene's phrases): an unknown
     colour there is an error, not an own scene's object."""
     try:
-        return parse_goal(caption)
+        task = parse_goal(caption)
     except GoalError:
-        try:
-            return read_canonical(caption)
-        except GoalError:
-            pass
-        raise
+        return read_canonical(caption)
+    if task.text == caption:
+        return task
+    try:  # read in zsrm's words ("a red cube" as "a red block"), but an own scene's canonical sentence
+        return read_canonical(caption)
+    except GoalError:
+        return task
 
 
 def _goal(task: "str | Task | SceneGoal") -> "Task | SceneGoal":
