@@ -120,7 +120,10 @@ def test_resume_refuses_other_settings(tmp_path):
 
 def test_saved_policy_reloads_and_acts_the_same(tmp_path):
     cfg = TrainConfig(goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128, **TINY)
-    train(cfg, tmp_path, progress=False)
+    summary = train(cfg, tmp_path, progress=False)
+    # the final evaluation both ways: final_* is the one eval_deterministic names (sampled here)
+    assert set(summary["final_by_actions"]) == {"mean", "sampled"}
+    assert summary["final_by_actions"]["sampled"]["mean"] == summary["final_mean"]
     a, b = PolicyBundle.load(tmp_path / "policy"), PolicyBundle.load(tmp_path / "policy")
     rng = np.random.default_rng(0)
     space = a.policy.observation_space
@@ -148,6 +151,19 @@ def test_saved_policy_reloads_and_acts_the_same(tmp_path):
             rollout(tmp_path / "policy", episodes=2, seed=seed)
         runs.append(np.concatenate(taken))
     assert not cfg.eval_deterministic and np.array_equal(runs[0], runs[1]) and not np.array_equal(runs[0], runs[2])
+    # deterministic=True plays the mean action, False samples it, None as the run evaluated (sampled)
+    asked = []
+
+    def record_mode(self, obs, deterministic=True):
+        asked.append(deterministic)
+        return act(self, obs, deterministic)
+
+    for deterministic, expected in ((True, True), (False, False), (None, False)):
+        asked.clear()
+        with pytest.MonkeyPatch.context() as m:
+            m.setattr(PolicyBundle, "act", record_mode)
+            rollout(tmp_path / "policy", episodes=2, seed=3, deterministic=deterministic)
+        assert asked and set(asked) == {expected}
 
 
 def test_policy_folder_errors_name_the_file(tmp_path):

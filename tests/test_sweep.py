@@ -78,3 +78,20 @@ def test_a_ray_that_starts_slowly_is_tried_again():
     with pytest.raises(Exception, match="no such cluster"):  # other failures are not retried
         start_ray(other, num_cpus=2, address="ray://nowhere:10001")
     assert other.inits == 1
+
+
+def test_gather_keeps_both_ways_of_acting_and_the_core_hours():
+    def run(seed, mean, sampled, wall_s):
+        return {"config": {"goal": "stack", "reward": "zsrm", "seed": seed}, "env_steps": 300, "wall_s": wall_s,
+                "final_mean": mean[0], "final_se": 1.0, "final_success_rate": mean[1], "curve": [],
+                "final_by_actions": {"mean": {"mean": mean[0], "se": 1.0, "success_rate": mean[1]},
+                                     "sampled": {"mean": sampled[0], "se": 1.0, "success_rate": sampled[1]}}}
+
+    cell = gather([run(0, (90.0, 1.0), (80.0, 0.8), 1800.0), run(1, (70.0, 0.6), (60.0, 0.4), 1800.0)])["stack"]["zsrm"]
+    assert cell["core_hours"] == 1.0
+    assert cell["final_by_actions"]["mean"] == {"final_mean": 80.0, "final_se": 10.0, "final_success_rate": 0.8}
+    assert cell["final_by_actions"]["sampled"]["final_mean"] == 70.0
+    assert cell["final_by_actions"]["sampled"]["final_success_rate"] == pytest.approx(0.6)
+    older = run(2, (50.0, 0.5), (50.0, 0.5), 3600.0)
+    del older["final_by_actions"]  # a run from before both were recorded: the cell has only final_*
+    assert "final_by_actions" not in gather([run(0, (90.0, 1.0), (80.0, 0.8), 1800.0), older])["stack"]["zsrm"]

@@ -298,3 +298,17 @@ def test_anneal_lr_decays_the_learning_rate_to_zero_over_the_run():
         assert constant.lr_schedule(0.1) == pytest.approx(1e-3)
     finally:
         venv.close()
+
+
+def test_log_std_init_sets_the_first_action_noise_and_is_unwritten_at_its_old_value():
+    from zsrm.rl.ppo import build_ppo
+
+    assert "log_std_init" not in TrainConfig(log_std_init=0.0).to_dict()  # runs made before it keep their config
+    cfg = TrainConfig(goal="stack", reward="oracle", log_std_init=-1.0, **TINY)
+    assert cfg.to_dict()["log_std_init"] == -1.0
+    venv = policy_view(make_vec(cfg, cfg.n_envs, 0), ColourVLM(), cfg)
+    try:
+        log_std = build_ppo(cfg, venv).policy.log_std.detach().numpy()
+    finally:
+        venv.close()
+    assert log_std.shape == venv.action_space.shape and np.allclose(log_std, -1.0)

@@ -32,7 +32,7 @@ class Train(TrainConfig):
     """Train a policy from pixels with PPO and a reward from the goal sentence."""
 
     out: str | None = None  # run folder (default: runs/rl/<goal>-<reward>-<seed>)
-    config: Literal["cpu", "paper", "v1"] = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v1 (before 2026-12-04)
+    config: Literal["cpu", "paper", "v3", "v1"] = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v3 (issue 52's learner: less action noise, mean-action evaluation), v1 (before 2026-12-04)
     fresh: bool = False  # start over instead of resuming the run folder's checkpoint
     device: str = "cpu"  # where the VLM trunk and PPO run: cpu, cuda, cuda:N or auto (not part of the run's config)
     env_workers: int = 0  # processes that step the scenes (0: 2 with 8+ envs and 2+ cores, else 1; the same numbers either way); give 1 when runs share the cores
@@ -63,6 +63,7 @@ class Rollout:
     gif: str | None = None  # write a GIF of the first episode here
     out: str | None = None  # JSON path for the result
     scene: str | None = None  # with random:GOAL, your own scene (module:Class or a registered id) whose objects GOAL names
+    actions: Literal["trained", "mean", "sampled"] = "trained"  # the policy's mean action, a sampled one, or as its run evaluated (eval_deterministic)
 
     def run(self) -> int:
         from zsrm.rl.evaluate import rollout
@@ -70,7 +71,8 @@ class Rollout:
         for path in (self.out, self.gif):
             if path:
                 check_writable(path)
-        result = rollout(self.policy, self.episodes, self.seed, self.spread, self.gif, self.scene)
+        deterministic = {"trained": None, "mean": True, "sampled": False}[self.actions]
+        result = rollout(self.policy, self.episodes, self.seed, self.spread, self.gif, self.scene, deterministic)
         print(f"oracle episode reward {result['mean']:.1f} +- {result['se']:.1f}, "
               f"success {result['success_rate']:.2f} over {self.episodes} episodes")
         if self.gif:
@@ -101,7 +103,7 @@ class Sweep:
     gather_only: bool = False  # train nothing: gather the trials finished so far (e.g. while a sweep runs)
     vlm: str = "scene"  # the VLM whose image trunk the policies read (a folder pretrained by zsrm pretrain-vlm)
     init_root: str | None = None  # start each trial from the policy of the trial of its name under here
-    config: Literal["cpu", "paper", "v1"] = "cpu"  # TrainConfig preset of every trial (v1: before 2026-12-04)
+    config: Literal["cpu", "paper", "v3", "v1"] = "cpu"  # TrainConfig preset of every trial (v3: issue 52's learner, v1: before 2026-12-04)
     scene: str | None = None  # your own scene (module:Class or a registered id) whose objects --tasks name (docs/own-scene.md)
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 

@@ -71,6 +71,10 @@ class TrainConfig:
     """entropy bonus"""
     clip_range: float = 0.2
     """PPO clip range"""
+    log_std_init: float = 0.0
+    """initial log standard deviation of the policy's Gaussian actions (stable-baselines3's
+    log_std_init; 0: a standard deviation of 1 over actions in [-1, 1]; v3's -1: 0.37, so early
+    grasps and placements are not shaken loose by the noise)"""
     target_kl: float = 0.0
     """stop an update's epochs at a minibatch whose KL from the rollout's policy passes 1.5x this
     (0: never; stable-baselines3's target_kl)"""
@@ -83,8 +87,9 @@ class TrainConfig:
     eval_episodes: int = 10
     """episodes per evaluation, on separate envs with their own seeds"""
     eval_deterministic: bool = False
-    """evaluate the policy's mean action instead of sampling it (the grip's hysteresis makes an
-    early mean action that never crosses a threshold score 0 while the sampled policy succeeds)"""
+    """evaluate the policy's mean action, as a deployed policy acts (v3), instead of sampling it (the
+    grip's hysteresis makes an early mean action that never crosses a threshold score 0 while the
+    sampled policy succeeds); a run's summary has both (final_by_actions)"""
     checkpoint_every: int = 20_000
     """environment steps between checkpoints a killed run resumes from"""
     threads: int = 1
@@ -92,7 +97,8 @@ class TrainConfig:
     start: Literal["auto", "above", "around"] = "auto"
     """tabletop tasks: the gripper starts open above the block the goal moves (above), or with its
     open fingers around it, so that closing them grasps it (around); auto: around for stacking
-    goals (on top of, below), whose oracle reward stayed 0 for 300k steps from above, else above"""
+    goals (on top of, below), whose oracle reward stayed 0 for 300k steps from above, and for inside
+    of (a block lifted into the box; from above 0 in 300k steps with zsrm), else above"""
     choice: bool = False
     """stacking goals: the scene also holds a third block (the first training colour the goal does not
     name) in line with the goal's, on the far side of the moved block from its base, so the policy
@@ -107,7 +113,7 @@ class TrainConfig:
     # Settings added after runs were committed: written only when changed, so that a finished
     # run made before they existed still matches its configuration.
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0,
-             "target_kl": 0.0, "anneal_lr": False, "scene": None}
+             "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False}
@@ -132,7 +138,7 @@ class TrainConfig:
             raise ValueError(f"--choice is for stacking goals (on top of, below): it puts a second possible "
                              f"base beside the moved block; {self.goal!r} is not one")
         if self.start == "auto":
-            self.start = "around" if relation in STACKING else "above"
+            self.start = "around" if relation in GRASPED else "above"
         if not self.scene and not takes_reward(self.goal, self.reward):
             raise ValueError(f"the {self.reward} reward reads a spatial relation; the pendulum trains with "
                              "base, oracle, curiosity or random")
@@ -187,8 +193,11 @@ def takes_reward(goal: str, reward: str) -> bool:
     return not (goal_relation(goal) is None and reward in ("zsrm", "vice"))
 
 
-# Relations whose tasks start with the moved block in the open fingers (start "auto").
+# Stacking relations (the choice scenes' goals).
 STACKING = ("on_top_of", "below")
+# Relations whose tasks start with the moved block in the open fingers (start "auto"): the block
+# must be lifted (onto another, into the box), which from above a policy rarely finds.
+GRASPED = (*STACKING, "inside_of")
 
 
 def check_scene_run(cfg: TrainConfig) -> None:
@@ -228,6 +237,9 @@ def goal_relation(goal: str, scene: str | None = None) -> str | None:
 PRESETS: dict[str, dict] = {
     "cpu": {},
     "paper": {"steps": 200_000, "n_envs": 16, "n_steps": 256, "batch_size": 512},
+    # issue 52's learner (docs/training.md): the policy's actions start with a standard deviation of
+    # 0.37 instead of 1, and it is evaluated by its mean action
+    "v3": {"log_std_init": -1.0, "eval_deterministic": True},
     # the default until 2026-12-04, behind the results committed before then (64 px policy views,
     # action repeat 2, 10 epochs): about a fifth of the default's speed (results/ppo_speed.json)
     "v1": {"trunk_size": 0, "pixel_size": 0, "action_repeat": 2, "n_epochs": 10, "batch_size": 128, "n_envs": 8,

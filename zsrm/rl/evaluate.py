@@ -106,10 +106,11 @@ def random_actions(action_space, seed: int) -> Callable[[dict], np.ndarray]:
 
 
 def rollout(policy: str | Path, episodes: int = 10, seed: int = 0, spread: str = "seen",
-            gif: str | Path | None = None, scene: str | None = None) -> dict:
+            gif: str | Path | None = None, scene: str | None = None, deterministic: bool | None = None) -> dict:
     """The oracle episode reward of a saved policy (a folder written by ``zsrm train``) or of
     ``"random:GOAL"`` (on your own ``scene`` when given) over seeded episodes; with ``gif``, a
-    GIF of the first episode."""
+    GIF of the first episode. ``deterministic``: play the policy's mean action (True) or sample
+    it (False); None: as its run evaluated it (``eval_deterministic``)."""
     from zsrm.rl.features import policy_view
     from zsrm.rl.policy import PolicyBundle
     from zsrm.vlm import load_vlm
@@ -125,8 +126,10 @@ def rollout(policy: str | Path, episodes: int = 10, seed: int = 0, spread: str =
         bundle = PolicyBundle.load(policy)
         cfg, vlm = bundle.cfg, load_vlm(bundle.cfg.vlm)
 
+        mean_action = cfg.eval_deterministic if deterministic is None else deterministic
+
         def act(obs):
-            return bundle.act(obs, deterministic=cfg.eval_deterministic)
+            return bundle.act(obs, deterministic=mean_action)
 
         def features(venv):
             return policy_view(venv, vlm, cfg)

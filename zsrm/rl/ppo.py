@@ -203,10 +203,15 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
                         reset_num_timesteps=state is None)
         callback.save()  # before the final evaluation, which a resume from here plays again
         final = evaluator(policy_act(model, cfg.eval_deterministic), FINAL_EPISODES)
+        # the same episodes with the other way of acting: what the mean action is worth, in every run
+        other = evaluator(policy_act(model, not cfg.eval_deterministic), FINAL_EPISODES)
     evaluator.close()
     venv.close()
     PolicyBundle(model.policy, cfg).save(out / "policy")
-    return write_summary(cfg, out, final, rows, callback.env_steps(), wall_s=time.time() - callback.t0)
+    by_actions = {("mean" if cfg.eval_deterministic else "sampled"): final,
+                  ("sampled" if cfg.eval_deterministic else "mean"): other}
+    return write_summary(cfg, out, final, rows, callback.env_steps(), wall_s=time.time() - callback.t0,
+                         by_actions=by_actions)
 
 
 def start_from(model: PPO, folder: str) -> None:
@@ -267,11 +272,16 @@ def finish_random(cfg: TrainConfig, out: Path) -> dict:
 
 
 def write_summary(cfg: TrainConfig, out: Path, final: dict, rows: list[dict], env_steps: int,
-                  wall_s: float | None = None) -> dict:
-    """``summary.json``; ``wall_s``: the run's seconds, the parts before a resume included."""
+                  wall_s: float | None = None, by_actions: dict | None = None) -> dict:
+    """``summary.json``; ``wall_s``: the run's seconds, the parts before a resume included;
+    ``by_actions``: the final evaluation with the policy's mean action and with sampled ones
+    (``final_*`` is the one ``eval_deterministic`` names)."""
     summary = {"config": cfg.to_dict(), "env_steps": env_steps, "final_mean": final["mean"], "final_se": final["se"],
                "final_success_rate": final["success_rate"], "final_episodes": len(final["episode_rewards"]),
                "final_episode_rewards": final["episode_rewards"], "curve": rows,
                **({"wall_s": round(wall_s, 1)} if wall_s is not None else {})}
+    if by_actions:
+        summary["final_by_actions"] = {k: {"mean": r["mean"], "se": r["se"], "success_rate": r["success_rate"]}
+                                       for k, r in sorted(by_actions.items())}
     write_json(out / "summary.json", summary)
     return summary

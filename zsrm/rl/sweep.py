@@ -263,7 +263,8 @@ def start_ray(ray, num_cpus: int, address: str | None, tries: int = 3) -> None:
 
 
 def gather(summaries) -> dict:
-    """``<task>.<reward>.{final_mean, final_se, seeds, steps, curve}`` from run summaries (paths
+    """``<task>.<reward>.{final_mean, final_se, seeds, steps, core_hours, curve}`` (and
+    ``final_by_actions``: the policies' mean and sampled actions) from run summaries (paths
     of ``summary.json`` files or their dicts); the curve is the mean and s.e. over seeds at each
     evaluation step that every seed reached."""
     runs: dict[tuple[str, str], list[dict]] = {}
@@ -281,8 +282,15 @@ def gather(summaries) -> dict:
             "steps": max(s["env_steps"] for s in group),
             "final_per_seed": finals,
             "final_success_rate": float(np.mean([s["final_success_rate"] for s in group])),
+            "core_hours": core_hours(group),
             "curve": mean_curve([s["curve"] for s in group]),
         }
+        if all("final_by_actions" in s for s in group):  # runs since 2026-12-06: both ways of acting
+            out[task][reward]["final_by_actions"] = {
+                way: {"final_mean": mean_se([s["final_by_actions"][way]["mean"] for s in group])[0],
+                      "final_se": mean_se([s["final_by_actions"][way]["mean"] for s in group])[1],
+                      "final_success_rate": float(np.mean([s["final_by_actions"][way]["success_rate"] for s in group]))}
+                for way in ("mean", "sampled")}
     return out
 
 
