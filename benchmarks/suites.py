@@ -43,13 +43,13 @@ SUITES = {
 EVAL_SEED = 50_000  # held-out frames: seeds apart from every stage of the chain
 
 
-def goal_frames(adapter, module, goal: str, frames: int, seed: int, camera: str) -> dict:
+def goal_frames(adapter, module, goal: str, frames: int, seed: int) -> dict:
     """``frames`` frames and the benchmark's predicate on each: half placed as the goal says, half
-    zsrm's exploration layouts; 0 to 5 random actions after either. ``images``: those of
-    ``camera`` (a role); ``images_<role>``: every role's (the labeler reads all three);
-    ``present``: (N, K) which of the adapter's objects each holds."""
+    zsrm's exploration layouts; 0 to 5 random actions after either. ``images_<role>``: each role's
+    frames (the reward reads the goal's, the labeler all three); ``present``: (N, K) which of the
+    adapter's objects each holds."""
     env = adapter.make_env(tuple(adapter.roles.values()), 64)
-    images, truth, source, present = [], [], [], []
+    truth, source, present = [], [], []
     roles = {r: [] for r in adapter.roles}
     try:
         for i in range(frames):
@@ -61,7 +61,6 @@ def goal_frames(adapter, module, goal: str, frames: int, seed: int, camera: str)
             for _ in range(int(rng.integers(0, 6))):
                 obs, *_ = env.step(adapter.exploration_action(env, rng))
             seen = adapter.observe(obs)
-            images.append(seen[camera])
             for r in roles:
                 roles[r].append(seen[r])
             held = adapter.object_positions(env)
@@ -70,36 +69,50 @@ def goal_frames(adapter, module, goal: str, frames: int, seed: int, camera: str)
             source.append("placed" if placed else "random")
     finally:
         env.close()
-    return {"images": np.stack(images), "success": np.array(truth), "source": np.array(source),
-            "present": np.array(present), **{f"images_{r}": np.stack(v) for r, v in roles.items()}}
+    return {"success": np.array(truth), "source": np.array(source), "present": np.array(present),
+            **{f"images_{r}": np.stack(v) for r, v in roles.items()}}
 
 
-def labeler_holds(chain: Path, f: dict, goal: str) -> np.ndarray:
-    """Whether zsrm's labeler (Grad-CAM points of the kept VLM through Table 1, as ``zsrm label``
-    captioned the chain's held-out data, with its centres and calibration) says ``goal`` on each frame."""
-    from dataclasses import fields
+class Labeler:
+    """zsrm's labeler as ``zsrm label`` captioned the chain's held-out data (Grad-CAM points of the
+    kept VLM through Table 1, with its centres and calibration), built once for every goal."""
 
-    from zsrm.common import files
-    from zsrm.data.dataset import ExplorationData
-    from zsrm.grounding.annotate import Grounder, LabelConfig, captions_from_pixels, gradcam_objects
-    from zsrm.vlm import load_vlm
+    def __init__(self, chain: Path):
+        from dataclasses import fields
 
-    data = ExplorationData(chain / "eval-data")
-    manifest = files.read_json(chain / "eval-data" / "labels" / "manifest.json", "labels manifest")
-    cfg = LabelConfig(**{k.name: manifest["config"][k.name] for k in fields(LabelConfig) if k.name in manifest["config"]})
-    grounder = Grounder(load_vlm(cfg.vlm), cfg, data, manifest.get("centres"), manifest.get("fine_centres"),
-                        silhouettes=manifest.get("silhouettes"))
-    arrays = {"scene": np.zeros(len(f["present"]), np.int64), **{f"images_{c}": f[f"images_{c}"] for c in data.cameras}}
-    captions = captions_from_pixels(data, cfg, gradcam_objects(data, grounder.shard(arrays)), f["present"],
-                                    arrays["scene"])
-    return np.array([goal in c for c in captions])
+        from zsrm.common import files
+        from zsrm.data.dataset import ExplorationData
+        from zsrm.grounding.annotate import Grounder, LabelConfig
+        from zsrm.vlm import load_vlm
+
+        self.data = ExplorationData(chain / "eval-data")
+        manifest = files.read_json(chain / "eval-data" / "labels" / "manifest.json", "labels manifest")
+        self.cfg = LabelConfig(**{k.name: manifest["config"][k.name] for k in fields(LabelConfig)
+                                  if k.name in manifest["config"]})
+        self.grounder = Grounder(load_vlm(self.cfg.vlm), self.cfg, self.data, manifest.get("centres"),
+                                 manifest.get("fine_centres"), silhouettes=manifest.get("silhouettes"))
+
+    def holds(self, f: dict, goal: str) -> np.ndarray:
+        """Whether the labeler says ``goal`` on each frame of :func:`goal_frames`."""
+        from zsrm.grounding.annotate import captions_from_pixels, gradcam_objects
+
+        arrays = {"scene": np.zeros(len(f["present"]), np.int64),
+                  **{f"images_{c}": f[f"images_{c}"] for c in self.data.cameras}}
+        captions = captions_from_pixels(self.data, self.cfg, gradcam_objects(self.data, self.grounder.shard(arrays)),
+                                        f["present"], arrays["scene"])
+        return np.array([goal in c for c in captions])
 
 
-def _language(scene: str) -> str:
-    """A benchmark task's instruction (its adapter class's first docstring line, quoted there)."""
+def _language(scene: str) -> str | None:
+    """A benchmark task's instruction, as the benchmark ships it (LIBERO's task ``language``)."""
     from zsrm.envs.adapter import load_adapter
 
-    return (type(load_adapter(scene)).__doc__ or "").split(":", 1)[-1].strip().strip('".')
+    task = getattr(load_adapter(scene), "task", None)
+    if task is None:
+        return None
+    from examples.libero.env import libero_task
+
+    return libero_task(task)[1].language
 
 
 def speeds(adapter, steps: int = 60) -> dict:
@@ -166,14 +179,15 @@ def main(argv=None) -> int:
     t1 = time.perf_counter()
     frames, by_scene, labeler = {}, {}, {}
     scenes = suite.get("frame_scenes", (suite["scene"],))
+    zsrm_labeler = Labeler(chain)
     for j, goal in enumerate(suite["goals"]):
         camera = RELATIONS[parse_scene_goal(goal, adapter.objects, suite["scene"]).relation].camera
-        parts = [goal_frames(load_adapter(name), module, goal, args.frames // len(scenes), EVAL_SEED + 100 * j + k,
-                             camera) for k, name in enumerate(scenes)]
+        parts = [goal_frames(load_adapter(name), module, goal, args.frames // len(scenes), EVAL_SEED + 100 * j + k)
+                 for k, name in enumerate(scenes)]
         by_scene[goal] = [len(p["success"]) for p in parts]
         f = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
-        labeler[goal] = binary_metrics(labeler_holds(chain, f, goal), f["success"])
-        frames[goal] = EvalFrames(goal, goal, camera, f["images"], f["success"], f["source"],
+        labeler[goal] = binary_metrics(zsrm_labeler.holds(f, goal), f["success"])
+        frames[goal] = EvalFrames(goal, goal, camera, f[f"images_{camera}"], f["success"], f["source"],
                                   np.arange(len(f["success"])), np.zeros(len(f["success"]), int))
     frames_s = time.perf_counter() - t1
 
@@ -198,7 +212,7 @@ def main(argv=None) -> int:
                                   f.source[cut[k]:cut[k + 1]], f.episode[cut[k]:cut[k + 1]], f.step[cut[k]:cut[k + 1]])
                 s = evaluate_rewards(models, {goal: part}, raw_scores={"base": base_raw})
                 reward[goal]["by_task"][name] = {
-                    "language": getattr(load_adapter(name), "task", None) and _language(name),
+                    "language": _language(name),
                     "frames": len(part), "positives": int(part.success.sum()),
                     **{m: {"f1": s[m][goal]["f1"], "auroc": s[m][goal]["auroc"]} for m in models}}
     import mujoco

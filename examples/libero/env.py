@@ -41,13 +41,11 @@ class LiberoTableEnv(RobosuiteTableEnv):
 
     def make_robosuite(self, task, control_freq: int, **kwargs):
         _robosuite()
-        from libero.libero import benchmark, get_libero_path
+        from libero.libero import get_libero_path
         from libero.libero.envs import OffScreenRenderEnv
 
-        suite, index = task
-        bench = benchmark.get_benchmark_dict()[suite]()
-        t = bench.get_task(index)
-        self.init_states = bench.get_task_init_states(index)
+        bench, t = libero_task(task)
+        self.init_states = bench.get_task_init_states(task[1])
         self.language = t.language
         self.wrapper = OffScreenRenderEnv(
             bddl_file_name=os.path.join(get_libero_path("bddl_files"), t.problem_folder, t.bddl_file),
@@ -72,3 +70,14 @@ class LiberoTableEnv(RobosuiteTableEnv):
     def close(self):
         self.renderer.close()
         self.wrapper.close()
+
+
+def libero_task(task):
+    """LIBERO's benchmark and task record of ``task`` = (suite, index): its BDDL file, its
+    instruction (``language``); read without building an env."""
+    _robosuite()
+    from libero.libero import benchmark
+
+    suite, index = task
+    bench = benchmark.get_benchmark_dict()[suite]()
+    return bench, bench.get_task(index)
