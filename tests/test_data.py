@@ -108,6 +108,9 @@ def test_held_blocks_are_an_option_older_datasets_never_had(whole, tmp_path):
     first = arrays["step"] == 0  # frames at reset
     heights = np.nanmax(arrays["positions"][first][..., 2], axis=1) - np.nanmin(arrays["positions"][first][..., 2], axis=1)
     assert first.any() and (heights > 0.06).any()
+    assert "p_hold_free" not in cfg.to_json() and CollectConfig(**CFG, p_hold_free=0.5).to_json()["p_hold_free"] == 0.5
+    with pytest.raises(ValueError, match="p_hold_free must be a probability"):
+        CollectConfig(**CFG, p_hold_free=2.0)
     pucks = CollectConfig(**{**CFG, "images": 2, "p_hold": 1.0, "scenes": ("pushing",)})
     assert len(collect(pucks, tmp_path / "pucks", progress=False)) == 2  # no gripper: the option is not passed
 

@@ -184,6 +184,32 @@ def test_exploration_can_start_with_a_block_held_above_another():
     env.close()
 
 
+def test_exploration_can_hold_a_block_high_anywhere_in_reach():
+    """p_hold_free=1: every held block is high above the others (5 half-widths up or more) and
+    within the gripper's reach, and stays held; p_hold alone keeps its random stream."""
+    from zsrm.envs.tabletop import X_RANGE
+
+    env = TabletopEnv(task=None, objects=("red", "green", "yellow"), image_size=16)
+    held = 0
+    for seed in range(8):
+        _, info = env.reset(seed=seed, options={"p_hold": 1.0, "p_hold_free": 1.0})
+        if env.held is None:
+            continue
+        held += 1
+        pos = info["object_positions"]
+        others = [p[2] for c, p in pos.items() if c != env.held]
+        assert pos[env.held][2] > max(others) + 0.06 and X_RANGE[0] <= pos[env.held][0] <= X_RANGE[1]
+        offset = pos[env.held] - env.gripper_position
+        for _ in range(3):
+            _, _, _, _, info = env.step(np.array([-0.3, 0.0, 0.0, 1.0]))
+        assert np.allclose(info["object_positions"][env.held] - env.gripper_position, offset, atol=0.01)
+    assert held >= 4
+    a, _ = env.reset(seed=3, options={"p_hold": 1.0})
+    b, _ = env.reset(seed=3, options={"p_hold": 1.0, "p_hold_free": 0.0})
+    assert np.array_equal(a["front"], b["front"])
+    env.close()
+
+
 def test_bad_input_gets_clear_errors():
     with pytest.raises(ValueError, match="known cameras: front, left, tilted"):
         TabletopEnv("stack", cameras=("top",))

@@ -57,6 +57,7 @@ class CollectConfig:
     p_stack: float = 0.25  # chance that a block starts stacked on another
     p_side: float = 0.25  # chance that an object starts beside another (near or touching)
     p_hold: float = 0.0  # tabletop: chance that the gripper starts holding a block above another
+    p_hold_free: float = 0.0  # tabletop: of those, the chance that the block is held anywhere in reach, high above the others
     p_box: float = 0.0  # tabletop: chance that a scene also holds the open box (half of those with a block in it)
     scene: str = ""  # your own scene instead of --scenes: a SceneAdapter as module:Class or a registered id (docs/own-scene.md)
     colours: tuple[str, ...] = field(init=False)
@@ -66,7 +67,7 @@ class CollectConfig:
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        for name in ("p_stack", "p_side", "p_hold", "p_box"):
+        for name in ("p_stack", "p_side", "p_hold", "p_hold_free", "p_box"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {getattr(self, name)!r}")
         self.scenes, self.cameras, self.exclude = tuple(self.scenes), tuple(self.cameras), tuple(self.exclude)
@@ -100,8 +101,8 @@ class CollectConfig:
                              "name an adapter class with zsrm.envs.register_scene")
         if self.scenes not in (("tabletop",), (self.scene,)):
             raise ValueError(f"give --scene (your own scene) or --scenes (zsrm's: {', '.join(SCENE_IDS)}), not both")
-        if self.p_hold or self.p_box:
-            raise ValueError("--p-hold and --p-box are for zsrm's tabletop, not for your own scene")
+        if self.p_hold or self.p_hold_free or self.p_box:
+            raise ValueError("--p-hold, --p-hold-free and --p-box are for zsrm's tabletop, not for your own scene")
         adapter = load_adapter(self.scene)
         self.scenes = (self.scene,)
         return adapter
@@ -124,7 +125,7 @@ class CollectConfig:
         d = asdict(self)
         d.pop("colours")
         # added later: datasets collected before them keep matching their manifest
-        for name in ("p_hold", "p_box", "scene"):
+        for name in ("p_hold", "p_hold_free", "p_box", "scene"):
             if not d[name]:
                 d.pop(name)
         return d
@@ -209,6 +210,8 @@ def collect_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> 
             options = {"p_stack": cfg.p_stack, "p_side": cfg.p_side}
             if scene == "tabletop" and cfg.p_hold:  # the only scene with a gripper that holds
                 options["p_hold"] = cfg.p_hold
+                if cfg.p_hold_free:
+                    options["p_hold_free"] = cfg.p_hold_free
             if with_box:
                 options["p_inside"] = P_BLOCK_IN_BOX
             obs, info = env.reset(seed=int(rng.integers(2**31 - 1)), options=options)

@@ -139,14 +139,17 @@ class TabletopEnv(MujocoPixelEnv):
         return all(ok(p) for c, p in layout.items() if c != "box")
 
     def _random_layout(self, p_stack: float = 0.25, p_side: float = 0.0, p_hold: float = 0.0,
-                       p_inside: float = 0.0):
+                       p_inside: float = 0.0, p_hold_free: float = 0.0):
         """Exploration: :meth:`MujocoPixelEnv._random_layout`; in a scene with the box, with
         probability ``p_inside`` a block starts just above the box's opening and falls in (random
         actions almost never drop one in, and "inside of" needs frames that show it); and with
         probability ``p_hold`` the gripper starts holding a block in the air above another (up to
         15 cm above stacked height, mostly in line with it). Random actions almost never lift a
         block over another, so without these frames a reward model never sees a block that hovers
-        just too high to be "on top of" one, and a policy learns to hover instead of stacking."""
+        just too high to be "on top of" one, and a policy learns to hover instead of stacking.
+        With probability ``p_hold_free`` a held block is instead anywhere in the gripper's reach,
+        high above the others (a policy trained on a student that never saw one lifted the block
+        to the top of the frame beside the others, where the student read "in between")."""
         layout = super()._random_layout(p_stack, p_side)
         self._hold_at_reset = None
         rng = self.np_random
@@ -159,6 +162,12 @@ class TabletopEnv(MujocoPixelEnv):
         if len(free) < 2:
             return layout
         mover, base = rng.choice(free, 2, replace=False).tolist()
+        # Drawn only with p_hold_free set: datasets without it keep their random stream.
+        if p_hold_free and rng.random() < p_hold_free:
+            layout[mover] = np.array([rng.uniform(*X_RANGE), rng.uniform(-0.3, 0.3) * BLOCK_HALF,
+                                      rng.uniform(TABLE_TOP + 5 * BLOCK_HALF, Z_RANGE[1] - GRASP_HEIGHT)])
+            self._hold_at_reset = mover
+            return layout
         b = layout[base]
         spread = 0.3 * BLOCK_HALF if rng.random() < 0.7 else 2.5 * BLOCK_HALF
         gap = rng.uniform(0.005, 0.15)  # above stacked height: "on top of" holds below 3 cm

@@ -149,6 +149,7 @@ class RewardData:
     seed: int = 0  # seed of the whole dataset
     labels: str = LABELS  # labels folder inside OUT
     p_hold: float = 0.25  # tabletop episodes that start with a block held above another (0: as before)
+    p_hold_free: float = 0.0  # of those, the share held anywhere in reach, high above the others (0: as the shipped student's data)
     p_box: float = 0.0  # tabletop episodes that also hold the open box, half with a block in it (label with a --vlm that knows "a box")
     eps_y: float = WORLD_THRESHOLDS.eps_y  # on top of / below: largest height offset (m), Table 1's
     close: float = WORLD_THRESHOLDS.close  # close to: largest centre distance (m), Table 1's
@@ -161,7 +162,8 @@ class RewardData:
         if self.scene:  # the env lays its objects out itself: zsrm's layouts (p_hold, p_box) do not apply
             return CollectConfig(images=self.images, shard_size=self.shard_size, seed=self.seed, scene=self.scene)
         return CollectConfig(images=self.images, shard_size=self.shard_size, seed=self.seed,
-                             scenes=("tabletop", "pushing"), p_hold=self.p_hold, p_box=self.p_box)
+                             scenes=("tabletop", "pushing"), p_hold=self.p_hold, p_hold_free=self.p_hold_free,
+                             p_box=self.p_box)
 
     def label_config(self) -> LabelConfig:
         from dataclasses import asdict
