@@ -152,14 +152,13 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     """Train (or resume) one PPO run; returns the summary written to ``out/summary.json``.
 
     ``on_eval(row)`` is called after each evaluation (the sweep reports it to Ray Tune). Neither
-    ``device`` ('cpu', 'cuda', 'auto': where the VLM trunk and PPO's networks run) nor
-    ``env_workers`` (:func:`auto_env_workers`) is in the run's config: a run resumes on any."""
+    ``device`` ('cpu', 'cuda', 'auto': where the VLM trunk and PPO's networks run) nor ``env_workers``
+    (:func:`auto_env_workers`) is in the run's config: a run resumes on any."""
     from stable_baselines3.common.logger import configure
     from tqdm import tqdm
 
-    out = Path(out)
     torch.set_num_threads(cfg.threads)
-    out.mkdir(parents=True, exist_ok=True)
+    (out := Path(out)).mkdir(parents=True, exist_ok=True)
     if (out / "summary.json").is_file() and not fresh:
         summary = read_json(out / "summary.json", "a zsrm train summary")
         if summary.get("config", {}) == cfg.to_dict():
@@ -202,16 +201,20 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
             model.learn(remaining // cfg.action_repeat, callback=[*extra_callbacks, callback],
                         reset_num_timesteps=state is None)
         callback.save()  # before the final evaluation, which a resume from here plays again
-        final = evaluator(policy_act(model, cfg.eval_deterministic), FINAL_EPISODES)
-        # the same episodes with the other way of acting: what the mean action is worth, in every run
-        other = evaluator(policy_act(model, not cfg.eval_deterministic), FINAL_EPISODES)
+        by_actions = final_evaluations(evaluator, model)
     evaluator.close()
     venv.close()
     PolicyBundle(model.policy, cfg).save(out / "policy")
-    by_actions = {("mean" if cfg.eval_deterministic else "sampled"): final,
-                  ("sampled" if cfg.eval_deterministic else "mean"): other}
-    return write_summary(cfg, out, final, rows, callback.env_steps(), wall_s=time.time() - callback.t0,
-                         by_actions=by_actions)
+    return write_summary(cfg, out, by_actions["mean" if cfg.eval_deterministic else "sampled"], rows,
+                         callback.env_steps(), wall_s=time.time() - callback.t0, by_actions=by_actions)
+
+
+def final_evaluations(evaluator: Evaluator, model: PPO) -> dict:
+    """The final policy on the same seeded episodes by its mean action and by sampled ones: the
+    summary's ``final_*`` is the one ``eval_deterministic`` names, and both are kept, so every run
+    says what the mean action is worth."""
+    return {"mean": evaluator(policy_act(model, True), FINAL_EPISODES),
+            "sampled": evaluator(policy_act(model, False), FINAL_EPISODES)}
 
 
 def start_from(model: PPO, folder: str) -> None:

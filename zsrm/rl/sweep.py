@@ -301,7 +301,8 @@ def core_hours(summaries) -> float:
     for summary in summaries:
         if not isinstance(summary, dict):
             summary = json.loads(Path(summary).read_text())
-        seconds += summary.get("wall_s", summary["curve"][-1]["wall_s"] if summary.get("curve") else 0.0)
+        last = summary["curve"][-1] if summary.get("curve") else {}
+        seconds += summary["wall_s"] if "wall_s" in summary else last.get("wall_s", 0.0)
     return round(seconds / 3600, 2)
 
 
