@@ -172,7 +172,7 @@ class RobosuiteTableEnv(gym.Env):
             self._place(obj, PARKED + [i * 0.3, 0, 0])
         return self.settle(self.reset_settle_steps), {}
 
-    def settle(self, steps: int = 5):
+    def settle(self, steps: int):
         """A few physics steps for placed objects to come to rest; the observation after them."""
         self.rs.sim.forward()
         for _ in range(steps):

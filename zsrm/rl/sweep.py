@@ -287,11 +287,14 @@ def gather(summaries) -> dict:
         }
         if all("final_by_actions" in s for s in group):  # runs since 2026-12-06: both ways of acting
             out[task][reward]["final_by_actions"] = {
-                way: {"final_mean": mean_se([s["final_by_actions"][way]["mean"] for s in group])[0],
-                      "final_se": mean_se([s["final_by_actions"][way]["mean"] for s in group])[1],
-                      "final_success_rate": float(np.mean([s["final_by_actions"][way]["success_rate"] for s in group]))}
-                for way in ("mean", "sampled")}
+                way: over_seeds([s["final_by_actions"][way] for s in group]) for way in ("mean", "sampled")}
     return out
+
+
+def over_seeds(finals: list[dict]) -> dict:
+    """Mean and s.e. over seeds of final evaluations ``{"mean", "success_rate"}``, and their mean success rate."""
+    mean, se = mean_se([f["mean"] for f in finals])
+    return {"final_mean": mean, "final_se": se, "final_success_rate": float(np.mean([f["success_rate"] for f in finals]))}
 
 
 def core_hours(summaries) -> float:

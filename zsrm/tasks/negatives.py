@@ -74,8 +74,9 @@ def caption_relation_camera(caption: str) -> tuple[str, str]:
 
 @lru_cache(maxsize=None)
 def read_caption(caption: str) -> "Task | SceneGoal":
-    """A caption as the labeler writes it: a Task where zsrm's grammar reads it, else the
-    SceneGoal of an own scene's canonical sentence (whose phrases zsrm's grammar does not know).
+    """A caption as the labeler writes it: a Task where zsrm's grammar reads it as written, else the
+    SceneGoal of an own scene's canonical sentence (phrases zsrm's grammar does not know, or reads
+    in its own words: "a red cube" as "a red block"), else the Task zsrm's grammar made of it.
     Kept per caption (both are frozen): training reads each caption's negatives at every step.
     Goals a user writes are read strictly (:func:`~zsrm.tasks.catalogue.as_task`, or
     :func:`~zsrm.tasks.scene_goals.parse_scene_goal` with the scene's phrases): an unknown
@@ -83,7 +84,11 @@ def read_caption(caption: str) -> "Task | SceneGoal":
     try:
         task = parse_goal(caption)
     except GoalError:
-        return read_canonical(caption)
+        try:
+            return read_canonical(caption)
+        except GoalError:
+            pass
+        raise  # zsrm's own reading's error (an unknown colour), not the own scenes'
     if task.text == caption:
         return task
     try:  # read in zsrm's words ("a red cube" as "a red block"), but an own scene's canonical sentence
