@@ -573,8 +573,29 @@ def test_a_goals_scenes_are_the_task_env_holding_the_goals_objects_alone():
 
 
 def test_the_example_envs_start_is_checked():
-    with pytest.raises(ValueError, match="start must be 'anywhere' or 'compact'"):
+    with pytest.raises(ValueError, match="start must be one of 'anywhere', 'compact', 'column'"):
         OwnSceneEnv(start="near")
+
+
+def test_the_sideways_scenes_start_in_a_column_with_the_pusher_beside_an_object():
+    """OwnSceneSideways' task scenes: the goal's objects one behind the other (neither left nor
+    right of the other), the pusher level with one of them, on either side over the seeds."""
+    adapter = load_adapter("examples.own_scene.adapter:OwnSceneSideways")
+    goal = scene_goal("a red cylinder on the right of a purple cylinder", "examples.own_scene.adapter:OwnSceneSideways")
+    env = SceneTask(adapter.make_env(("cam_front",), 16, goal.objects, task=True), adapter, goal)
+    sides = set()
+    for seed in range(8):
+        _, info = env.reset(seed=seed)
+        base = env.unwrapped
+        assert (base.start, base.step_size) == ("column", 0.01) and not info["is_success"]
+        (x1, y1), (x2, y2) = (base.body_position(b)[:2] for b in base.objects)
+        assert abs(x1 - x2) < 0.0083 and abs(y1 - y2) > 0.05  # no sideways relation: the margin is 0.83 cm
+        pusher = base.data.qpos[:2]
+        nearest = min(((x1, y1), (x2, y2)), key=lambda p: np.hypot(*(pusher - p)))
+        assert abs(pusher[1] - nearest[1]) < 0.015 and 0.05 < abs(pusher[0] - nearest[0]) < 0.07
+        sides.add(bool(pusher[0] > nearest[0]))
+    assert sides == {False, True}
+    env.close()
 
 
 def test_parse_goal_reads_a_goal_over_the_scenes_objects(capsys):

@@ -41,6 +41,14 @@ class OwnScene(SceneAdapter):
         return {p: base.body_position(BODIES[p]) for p in self.objects if BODIES[p] in base.objects}
 
 
+class OwnSceneSideways(OwnScene):
+    """The same scene, with task scenes for sideways goals (right of, left of): the goal's objects
+    one behind the other, the pusher just beside one of them. From the compact start a sideways
+    goal needs the pusher to go round an object first, and no reward learnt it (docs/own-scene.md)."""
+
+    task_env_kwargs = {"start": "column", "step_size": 0.01}
+
+
 class OwnSceneFromXml(SceneAdapter):
     """The same scene from its MuJoCo XML alone, with no env of one's own: zsrm builds the env
     (camera images in, the actuators' controls out, normalised to [-1, 1] over their ctrlrange:

@@ -27,10 +27,15 @@ PLACE_X, PLACE_Y = 0.19, 0.12  # objects start within these half extents of the 
 # start="compact": the objects within these half extents, 1 cm or more apart, and the pusher
 # just in front of one of them, so that a few pushes change which object is where.
 COMPACT_X, COMPACT_Y = 0.08, 0.06
+# start="column": the objects one behind the other (x within 3 mm, 2 to 6 cm between edges), so
+# that neither is left or right of another, and the pusher just beside one of them, on either side:
+# a sideways push of the right object changes which is left of which.
+COLUMN_DX, COLUMN_GAP = 0.003, (0.02, 0.06)
 PUSHER_RADIUS = 0.02
 RADIUS = {"bowl": 0.049}  # other objects: the cylinders' 0.025
 MAX_MOVE = 0.02  # the default step_size
 HIDDEN_GROUP = 3
+STARTS = ("anywhere", "compact", "column")
 
 
 class OwnSceneEnv(gym.Env):
@@ -38,8 +43,9 @@ class OwnSceneEnv(gym.Env):
 
     cameras: which of ``CAMERAS`` to observe; image_size: square image side;
     objects: which of ``OBJECT_BODIES`` are on the table (the others are hidden away);
-    start: "anywhere" (objects anywhere on the table, the pusher anywhere along the front edge)
-    or "compact" (objects near the centre, the pusher just in front of one of them);
+    start: "anywhere" (objects anywhere on the table, the pusher anywhere along the front edge),
+    "compact" (objects near the centre, the pusher just in front of one of them) or "column"
+    (objects one behind the other near the centre, the pusher just beside one of them);
     step_size: metres of pusher target motion per step at |action| = 1.
     """
 
@@ -48,8 +54,8 @@ class OwnSceneEnv(gym.Env):
 
     def __init__(self, cameras=CAMERAS, image_size: int = 64, objects=OBJECT_BODIES, render_mode=None,
                  start: str = "anywhere", step_size: float = MAX_MOVE):
-        if start not in ("anywhere", "compact"):
-            raise ValueError(f"start must be 'anywhere' or 'compact', got {start!r}")
+        if start not in STARTS:
+            raise ValueError(f"start must be one of {', '.join(map(repr, STARTS))}, got {start!r}")
         self.start, self.step_size = start, float(step_size)
         self.cameras = tuple(cameras)
         for cam in self.cameras:
@@ -97,25 +103,14 @@ class OwnSceneEnv(gym.Env):
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         mujoco.mj_resetData(self.model, self.data)
-        rng, placed = self.np_random, []
-        compact = self.start == "compact"
-        half = (COMPACT_X, COMPACT_Y) if compact else (PLACE_X, PLACE_Y)
-        for i, name in enumerate(OBJECT_BODIES):
-            if name not in self.objects:
-                self._place(name, (3.0 + i, 3.0, 0.1))
-                continue
-            radius = RADIUS.get(name, 0.025)
-            for _ in range(200):  # anywhere: centres 9 cm apart (the bowl's width); compact: 1 cm between edges
-                xy = rng.uniform(np.negative(half), half)
-                if all(np.linalg.norm(xy - q) > (radius + r + 0.01 if compact else 0.09) for q, r in placed):
-                    break
-            placed.append((xy, radius))
-            self._place(name, (*xy, REST_Z.get(name, CYLINDER_REST_Z)))
-        start = rng.uniform((-0.2, -0.14), (0.2, -0.11))  # the pusher starts along the front edge
-        if compact:  # ... or just in front of one of the objects, where nothing is in its way
-            xy, r_front = placed[rng.integers(len(placed))]
-            ready = xy + (rng.uniform(-0.01, 0.01), -(r_front + PUSHER_RADIUS + 0.015))
-            if all(np.linalg.norm(ready - q) >= r + PUSHER_RADIUS + 0.01 for q, r in placed if q is not xy):
+        placed = self._column() if self.start == "column" else self._scatter(self.start == "compact")
+        start = self.np_random.uniform((-0.2, -0.14), (0.2, -0.11))  # the pusher starts along the front edge
+        if self.start != "anywhere":  # ... or just in front of (beside) one of the objects, if nothing is in its way
+            xy, r = placed[self.np_random.integers(len(placed))]
+            gap = r + PUSHER_RADIUS + 0.015
+            ready = xy + ((self.np_random.choice((-gap, gap)), self.np_random.uniform(-0.01, 0.01))
+                          if self.start == "column" else (self.np_random.uniform(-0.01, 0.01), -gap))
+            if all(np.linalg.norm(ready - q) >= rq + PUSHER_RADIUS + 0.01 for q, rq in placed if q is not xy):
                 start = ready
         self.data.qpos[:2] = start
         self.data.ctrl[:] = start
@@ -123,6 +118,39 @@ class OwnSceneEnv(gym.Env):
         for _ in range(5):  # settle onto the table
             mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
         return self._observation(), {}
+
+    def _scatter(self, compact: bool) -> list:
+        """Place the held objects at random: anywhere, centres 9 cm apart (the bowl's width), or
+        compact, 1 cm or more between edges. Returns [(xy, radius)] of the placed objects."""
+        half, placed = (COMPACT_X, COMPACT_Y) if compact else (PLACE_X, PLACE_Y), []
+        for i, name in enumerate(OBJECT_BODIES):
+            if name not in self.objects:
+                self._place(name, (3.0 + i, 3.0, 0.1))
+                continue
+            radius = RADIUS.get(name, 0.025)
+            for _ in range(200):
+                xy = self.np_random.uniform(np.negative(half), half)
+                if all(np.linalg.norm(xy - q) > (radius + r + 0.01 if compact else 0.09) for q, r in placed):
+                    break
+            placed.append((xy, radius))
+            self._place(name, (*xy, REST_Z.get(name, CYLINDER_REST_Z)))
+        return placed
+
+    def _column(self) -> list:
+        """Place the held objects one behind the other in a random order near the table's centre."""
+        rng, placed = self.np_random, []
+        x, y = rng.uniform(-COMPACT_X, COMPACT_X), rng.uniform(-COMPACT_Y, -COMPACT_Y / 2)
+        for i, name in enumerate(OBJECT_BODIES):
+            if name not in self.objects:
+                self._place(name, (3.0 + i, 3.0, 0.1))
+        for name in rng.permutation([n for n in OBJECT_BODIES if n in self.objects]):
+            radius = RADIUS.get(name, 0.025)
+            if placed:
+                y += placed[-1][1] + radius + rng.uniform(*COLUMN_GAP)
+            xy = np.array([x + rng.uniform(-COLUMN_DX, COLUMN_DX), y])
+            placed.append((xy, radius))
+            self._place(name, (*xy, REST_Z.get(name, CYLINDER_REST_Z)))
+        return placed
 
     def step(self, action):
         action = np.clip(np.asarray(action, np.float64), -1.0, 1.0)
