@@ -579,7 +579,7 @@ def test_the_example_envs_start_is_checked():
 
 def test_the_sideways_scenes_start_in_a_column_with_the_pusher_beside_an_object():
     """OwnSceneSideways' task scenes: the goal's objects one behind the other (neither left nor
-    right of the other), the pusher level with one of them, on either side over the seeds."""
+    right of the other), the pusher level with the front one, on either side over the seeds."""
     adapter = load_adapter("examples.own_scene.adapter:OwnSceneSideways")
     goal = scene_goal("a red cylinder on the right of a purple cylinder", "examples.own_scene.adapter:OwnSceneSideways")
     env = SceneTask(adapter.make_env(("cam_front",), 16, goal.objects, task=True), adapter, goal)
@@ -591,7 +591,7 @@ def test_the_sideways_scenes_start_in_a_column_with_the_pusher_beside_an_object(
         (x1, y1), (x2, y2) = (base.body_position(b)[:2] for b in base.objects)
         assert abs(x1 - x2) < 0.0083 and abs(y1 - y2) > 0.05  # no sideways relation: the margin is 0.83 cm
         pusher = base.data.qpos[:2]
-        nearest = min(((x1, y1), (x2, y2)), key=lambda p: np.hypot(*(pusher - p)))
+        nearest = min(((x1, y1), (x2, y2)), key=lambda p: p[1])  # the front object (the camera looks along +y)
         assert abs(pusher[1] - nearest[1]) < 0.015 and 0.05 < abs(pusher[0] - nearest[0]) < 0.07
         sides.add(bool(pusher[0] > nearest[0]))
     assert sides == {False, True}

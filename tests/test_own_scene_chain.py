@@ -357,3 +357,25 @@ def test_the_recorded_command_reruns_the_same_chain():
     again = from_namespace(SceneChain, build_parser().parse_args(shlex.split(words)))
     assert again.command() == chain.command() and again.goals == chain.goals and again.zoom == 0.5
     assert chain.command().startswith(f"zsrm own-scene --scene {SPEC} --goals ")
+
+
+def test_a_goals_ppo_cells_keep_each_reward_and_the_ratio():
+    from zsrm.pipeline.own_scene import ppo_cells
+
+    cell = lambda m: {"final_mean": m, "final_se": 1.0, "seeds": 3, "final_per_seed": [m] * 3, "steps": 300}  # noqa: E731
+    learning = {"g": {"oracle": cell(40.0), "zsrm": cell(36.0), "random": cell(4.0), "base": cell(9.0)}}
+    got = ppo_cells(learning, "g")
+    assert set(got) == {"goal", "oracle", "zsrm", "random", "zsrm_over_oracle"}
+    assert got["zsrm_over_oracle"] == pytest.approx(0.9)
+    assert got["oracle"] == {"mean": 40.0, "se": 1.0, "seeds": 3, "final_per_seed": [40.0] * 3, "steps": 300}
+
+
+def test_the_sideways_benchmark_needs_the_chains_student(tmp_path):
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import own_scene
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    with pytest.raises(SystemExit, match="has no student: run the chain there first"):
+        own_scene.main(["--sideways", "--work", str(tmp_path), "--out", str(tmp_path / "r.json")])
+    assert not (tmp_path / "r.json").exists()

@@ -28,7 +28,7 @@ PLACE_X, PLACE_Y = 0.19, 0.12  # objects start within these half extents of the 
 # just in front of one of them, so that a few pushes change which object is where.
 COMPACT_X, COMPACT_Y = 0.08, 0.06
 # start="column": the objects one behind the other (x within 3 mm, 2 to 6 cm between edges), so
-# that neither is left or right of another, and the pusher just beside one of them, on either side:
+# that neither is left or right of another, and the pusher just beside the front one, on either side:
 # a sideways push of the right object changes which is left of which.
 COLUMN_DX, COLUMN_GAP = 0.003, (0.02, 0.06)
 PUSHER_RADIUS = 0.02
@@ -45,7 +45,7 @@ class OwnSceneEnv(gym.Env):
     objects: which of ``OBJECT_BODIES`` are on the table (the others are hidden away);
     start: "anywhere" (objects anywhere on the table, the pusher anywhere along the front edge),
     "compact" (objects near the centre, the pusher just in front of one of them) or "column"
-    (objects one behind the other near the centre, the pusher just beside one of them);
+    (objects one behind the other near the centre, the pusher just beside the front one);
     step_size: metres of pusher target motion per step at |action| = 1.
     """
 
@@ -106,7 +106,9 @@ class OwnSceneEnv(gym.Env):
         placed = self._column() if self.start == "column" else self._scatter(self.start == "compact")
         start = self.np_random.uniform((-0.2, -0.14), (0.2, -0.11))  # the pusher starts along the front edge
         if self.start != "anywhere":  # ... or just in front of (beside) one of the objects, if nothing is in its way
-            xy, r = placed[self.np_random.integers(len(placed))]
+            # column: beside the front object, which the front camera sees whole; else any of them
+            xy, r = (min(placed, key=lambda p: p[0][1]) if self.start == "column"
+                     else placed[self.np_random.integers(len(placed))])
             gap = r + PUSHER_RADIUS + 0.015
             ready = xy + ((self.np_random.choice((-gap, gap)), self.np_random.uniform(-0.01, 0.01))
                           if self.start == "column" else (self.np_random.uniform(-0.01, 0.01), -gap))

@@ -321,10 +321,7 @@ class SceneChain:
                              "checks": {s: {"masking_min": c["masking"]["min"], "presence_auroc": c["presence_auroc"]}
                                         for s, c in vlm["checks"].items()}}
         if learning and self.ppo_goal in learning:
-            cells = {r: {"mean": c["final_mean"], "se": c["final_se"], "seeds": c["seeds"],
-                         "final_per_seed": c["final_per_seed"], "steps": c["steps"]}
-                     for r, c in learning[self.ppo_goal].items() if r in ("oracle", "zsrm", "random")}
-            result["ppo"] = {"goal": self.ppo_goal, **cells}
+            result["ppo"] = ppo_cells(learning, self.ppo_goal)
         result["gates"] = [{"stage": g.stage, "ok": g.ok, "line": g.line} for g in gates]
         result["usable"] = all(g.ok for g in gates)
         result["meta"] = {
@@ -375,6 +372,17 @@ def check_vlm(folder: Path, scene: str, n_images: int = 300, seed: int = 0, prog
     return {"presence_auroc": {k.split(".", 1)[1]: v for k, v in presence.items() if k.startswith("auroc.")},
             "presence_counts": presence["meta"]["counts"], "masking": masking,
             "mask_radius_px": {o: round(float(r), 2) for o, r in zip(adapter.objects, radius)}}
+
+
+def ppo_cells(learning: dict, goal: str) -> dict:
+    """A goal's PPO result in a scene's summary, from a sweep's gathered ``learning.json``: per
+    reward (oracle, zsrm, random) the final mean, its s.e. over seeds, each seed's, and the steps."""
+    cells = {r: {"mean": c["final_mean"], "se": c["final_se"], "seeds": c["seeds"],
+                 "final_per_seed": c["final_per_seed"], "steps": c["steps"]}
+             for r, c in learning[goal].items() if r in ("oracle", "zsrm", "random")}
+    if "oracle" in cells and "zsrm" in cells and cells["oracle"]["mean"]:
+        cells["zsrm_over_oracle"] = cells["zsrm"]["mean"] / cells["oracle"]["mean"]
+    return {"goal": goal, **cells}
 
 
 def vlm_seconds(out: Path, seeds) -> float:
