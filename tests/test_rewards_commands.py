@@ -90,3 +90,12 @@ def test_reward_curve_writes_table_and_plot(vlm_folder, tmp_path, capsys):
     assert list(rows[0]) == ["step", "distance", "base_reward", "oracle"] and len(rows) == 7
     assert out.with_suffix(".png").stat().st_size > 10_000
     assert "spearman_with_closeness" in capsys.readouterr().out
+
+
+def test_eval_reward_writes_its_curves_beside_a_report_written_elsewhere():
+    from zsrm.pipeline.measure import EvalReward
+
+    assert EvalReward().curves_folder() == "results/reward_curves"  # the committed figure's folder
+    assert EvalReward(out="runs/x/reward.json").curves_folder() == "runs/x/reward_curves"
+    assert EvalReward(out="runs/x/reward.json", curves="").curves_folder() == ""
+    assert EvalReward(out="runs/x/reward.json", curves="elsewhere").curves_folder() == "elsewhere"

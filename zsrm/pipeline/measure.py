@@ -294,7 +294,7 @@ class EvalReward:
     every: int = 2  # keep every this many steps' frame
     seed: int = 10_000  # first episode seed
     out: str = "results/reward_eval.json"  # JSON report
-    curves: str = "results/reward_curves"  # folder for curve CSV/PNG ('' to skip)
+    curves: str = "auto"  # folder for curve CSV/PNG; auto: results/reward_curves with the default --out, else <out>_curves/ beside --out ('' to skip)
     curve_steps: int = 80  # steps of each scripted curve
     scene: str = ""  # your own scene (module:Class or a registered id): --tasks are goal sentences over its objects, scored on --data
     data: str = ""  # with --scene: held-out data of it (zsrm collect --scene, then zsrm label), labelled by its oracle
@@ -309,6 +309,7 @@ class EvalReward:
         if self.scene:
             return self.run_scene()
         files.check_writable(self.out)
+        self.curves = self.curves_folder()
         if self.curves:
             files.check_writable(self.curves, folder=True)
         names, models, base_vlm = self._models()
@@ -329,6 +330,15 @@ class EvalReward:
         self._print_table(results, models, [*self.tasks, *(f"{d}_distractor" for d in self.distractor_tasks)])
         print(f"wrote {out}")
         return 0 if np.isfinite([results[k][t]["f1"] for k in models for t in self.tasks]).all() else 1
+
+    def curves_folder(self) -> str:
+        """Where the curves go: ``auto`` keeps a report written elsewhere from overwriting the
+        committed ``results/reward_curves``."""
+        if self.curves != "auto":
+            return self.curves
+        if Path(self.out) == Path(type(self).out):
+            return "results/reward_curves"
+        return str(Path(self.out).with_suffix("")) + "_curves"
 
     def run_scene(self) -> int:
         """eval-reward on an own scene: its goals, its held-out collected frames, its oracle."""
