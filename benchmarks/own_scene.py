@@ -13,7 +13,8 @@ Every stage resumes or is skipped when its output is there.
 ``--sideways`` trains the sideways goal instead (a red cylinder on the right of a purple one) in
 the task scenes of ``OwnSceneSideways`` (the two cylinders one behind the other, the pusher
 beside the front one), with the ``v3`` learner and the chain's VLM and student in ``--work``
-(which the chain must have reached eval-reward in), and adds ``ppo_sideways`` to ``--out``.
+(which the chain must have reached eval-reward in), and adds ``ppo_sideways`` to ``--out`` (the
+sweep's summary, curves and trials in ``results/own_scene/sideways/`` for the default ``--out``).
 """
 from __future__ import annotations
 
@@ -40,7 +41,8 @@ def sideways(work: Path, out: Path, steps: int, num_cpus: int) -> int:
     from zsrm.pipeline.learn import Sweep
     from zsrm.pipeline.own_scene import ppo_cells
 
-    student, learning = work / "student", work / "learning_sideways.json"
+    # the sweep's summary and trial files beside the results (results/own_scene/sideways/)
+    student, learning = work / "student", out.with_suffix("") / "sideways" / "learning.json"
     if not (student / "training.json").is_file():
         raise SystemExit(f"{work} has no student: run the chain there first (python benchmarks/own_scene.py "
                          f"--work {work} --until eval-reward)")
