@@ -11,8 +11,8 @@ Every stage resumes or is skipped when its output is there.
     python benchmarks/own_scene.py --sideways --work runs/scenes/own_scene  # + ppo_sideways (about 1 h)
 
 ``--sideways`` trains the sideways goal instead (a red cylinder on the right of a purple one) in
-the task scenes of ``OwnSceneSideways`` (the two cylinders one behind the other, the pusher
-beside the front one), with the ``v3`` learner and the chain's VLM and student in ``--work``
+the task scenes of ``OwnSceneSideways`` (the two cylinders one behind the other, the pusher on
+the red one's left), with the ``v3`` learner and the chain's VLM and student in ``--work``
 (which the chain must have reached eval-reward in), and adds ``ppo_sideways`` to ``--out`` (the
 sweep's summary, curves and trials in ``results/own_scene/sideways/`` for the default ``--out``).
 """

@@ -577,24 +577,31 @@ def test_the_example_envs_start_is_checked():
         OwnSceneEnv(start="near")
 
 
-def test_the_sideways_scenes_start_in_a_column_with_the_pusher_beside_an_object():
+def test_the_sideways_scenes_start_in_a_column_with_the_pusher_beside_the_moved_object():
     """OwnSceneSideways' task scenes: the goal's objects one behind the other (neither left nor
-    right of the other), the pusher level with the front one, on either side over the seeds."""
-    adapter = load_adapter("examples.own_scene.adapter:OwnSceneSideways")
-    goal = scene_goal("a red cylinder on the right of a purple cylinder", "examples.own_scene.adapter:OwnSceneSideways")
-    env = SceneTask(adapter.make_env(("cam_front",), 16, goal.objects, task=True), adapter, goal)
-    sides = set()
-    for seed in range(8):
-        _, info = env.reset(seed=seed)
-        base = env.unwrapped
-        assert (base.start, base.step_size) == ("column", 0.01) and not info["is_success"]
-        (x1, y1), (x2, y2) = (base.body_position(b)[:2] for b in base.objects)
-        assert abs(x1 - x2) < 0.0083 and abs(y1 - y2) > 0.05  # no sideways relation: the margin is 0.83 cm
-        pusher = base.data.qpos[:2]
-        nearest = min(((x1, y1), (x2, y2)), key=lambda p: p[1])  # the front object (the camera looks along +y)
-        assert abs(pusher[1] - nearest[1]) < 0.015 and 0.05 < abs(pusher[0] - nearest[0]) < 0.07
-        sides.add(bool(pusher[0] > nearest[0]))
-    assert sides == {False, True}
+    right of the other), the pusher level with the object the goal moves, on the side it is
+    pushed from (the adapter's task_reset_options, passed by SceneTask to the env's reset)."""
+    spec = "examples.own_scene.adapter:OwnSceneSideways"
+    adapter = load_adapter(spec)
+    for goal_text, side in (("a red cylinder on the right of a purple cylinder", -1),
+                            ("a purple cylinder on the left of a red cylinder", 1)):
+        goal = scene_goal(goal_text, spec)
+        env = SceneTask(adapter.make_env(("cam_front",), 16, goal.objects, task=True), adapter, goal)
+        for seed in range(4):
+            _, info = env.reset(seed=seed)
+            base = env.unwrapped
+            assert (base.start, base.step_size) == ("column", 0.01) and not info["is_success"]
+            (x1, y1), (x2, y2) = (base.body_position(b)[:2] for b in base.objects)
+            assert abs(x1 - x2) < 0.0083 and abs(y1 - y2) > 0.05  # no sideways relation: the margin is 0.83 cm
+            mover, pusher = base.body_position(BODIES[goal.objects[0]])[:2], base.data.qpos[:2]
+            assert abs(pusher[1] - mover[1]) < 0.015 and 0.05 < side * (pusher[0] - mover[0]) < 0.07
+        env.close()
+    env = OwnSceneEnv(objects=("red_cylinder", "purple_cylinder"), start="column", image_size=16)
+    sides = {bool(env.reset(seed=s)[0] is not None and env.data.qpos[0] > min(
+        (env.body_position(b) for b in env.objects), key=lambda p: p[1])[0]) for s in range(8)}
+    assert sides == {False, True}  # without options: beside the front object, either side
+    with pytest.raises(ValueError, match="beside: 'bowl' is not on the table"):
+        env.reset(seed=0, options={"beside": "bowl"})
     env.close()
 
 

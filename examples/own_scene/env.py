@@ -36,6 +36,7 @@ RADIUS = {"bowl": 0.049}  # other objects: the cylinders' 0.025
 MAX_MOVE = 0.02  # the default step_size
 HIDDEN_GROUP = 3
 STARTS = ("anywhere", "compact", "column")
+SIDES = {"left": -1.0, "right": 1.0}  # reset(options={"side": ...}): which side of the object the pusher starts
 
 
 class OwnSceneEnv(gym.Env):
@@ -47,6 +48,8 @@ class OwnSceneEnv(gym.Env):
     "compact" (objects near the centre, the pusher just in front of one of them) or "column"
     (objects one behind the other near the centre, the pusher just beside the front one);
     step_size: metres of pusher target motion per step at |action| = 1.
+    ``reset(options=...)``: "beside" (a body) starts the pusher by that object instead; "side"
+    ("left" or "right") puts it on that side of it in a column.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 12}
@@ -106,13 +109,14 @@ class OwnSceneEnv(gym.Env):
         placed = self._column() if self.start == "column" else self._scatter(self.start == "compact")
         start = self.np_random.uniform((-0.2, -0.14), (0.2, -0.11))  # the pusher starts along the front edge
         if self.start != "anywhere":  # ... or just in front of (beside) one of the objects, if nothing is in its way
-            # column: beside the front object, which the front camera sees whole; else any of them
-            xy, r = (min(placed, key=lambda p: p[0][1]) if self.start == "column"
-                     else placed[self.np_random.integers(len(placed))])
+            xy, r = self._next_to(placed, options or {})
             gap = r + PUSHER_RADIUS + 0.015
-            ready = xy + ((self.np_random.choice((-gap, gap)), self.np_random.uniform(-0.01, 0.01))
-                          if self.start == "column" else (self.np_random.uniform(-0.01, 0.01), -gap))
-            if all(np.linalg.norm(ready - q) >= rq + PUSHER_RADIUS + 0.01 for q, rq in placed if q is not xy):
+            if self.start == "column":  # on the side options name, else either
+                side = SIDES.get((options or {}).get("side")) or self.np_random.choice((-1.0, 1.0))
+                ready = xy + (side * gap, self.np_random.uniform(-0.01, 0.01))
+            else:
+                ready = xy + (self.np_random.uniform(-0.01, 0.01), -gap)
+            if all(np.linalg.norm(ready - q) >= rq + PUSHER_RADIUS + 0.01 for q, rq in placed.values() if q is not xy):
                 start = ready
         self.data.qpos[:2] = start
         self.data.ctrl[:] = start
@@ -121,10 +125,21 @@ class OwnSceneEnv(gym.Env):
             mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
         return self._observation(), {}
 
+    def _next_to(self, placed: dict, options: dict) -> tuple:
+        """(xy, radius) of the placed object the pusher starts by: ``options["beside"]`` (a body)
+        if given; in a column the front one, which the front camera sees whole; else any of them."""
+        if options.get("beside"):
+            if options["beside"] not in placed:
+                raise ValueError(f"beside: {options['beside']!r} is not on the table; it holds {', '.join(placed)}")
+            return placed[options["beside"]]
+        if self.start == "column":
+            return min(placed.values(), key=lambda p: p[0][1])
+        return list(placed.values())[self.np_random.integers(len(placed))]
+
     def _scatter(self, compact: bool) -> list:
         """Place the held objects at random: anywhere, centres 9 cm apart (the bowl's width), or
-        compact, 1 cm or more between edges. Returns [(xy, radius)] of the placed objects."""
-        half, placed = (COMPACT_X, COMPACT_Y) if compact else (PLACE_X, PLACE_Y), []
+        compact, 1 cm or more between edges. Returns {body: (xy, radius)} of the placed objects."""
+        half, placed = (COMPACT_X, COMPACT_Y) if compact else (PLACE_X, PLACE_Y), {}
         for i, name in enumerate(OBJECT_BODIES):
             if name not in self.objects:
                 self._place(name, (3.0 + i, 3.0, 0.1))
@@ -132,26 +147,25 @@ class OwnSceneEnv(gym.Env):
             radius = RADIUS.get(name, 0.025)
             for _ in range(200):
                 xy = self.np_random.uniform(np.negative(half), half)
-                if all(np.linalg.norm(xy - q) > (radius + r + 0.01 if compact else 0.09) for q, r in placed):
+                if all(np.linalg.norm(xy - q) > (radius + r + 0.01 if compact else 0.09) for q, r in placed.values()):
                     break
-            placed.append((xy, radius))
+            placed[name] = (xy, radius)
             self._place(name, (*xy, REST_Z.get(name, CYLINDER_REST_Z)))
         return placed
 
-    def _column(self) -> list:
+    def _column(self) -> dict:
         """Place the held objects one behind the other in a random order near the table's centre."""
-        rng, placed = self.np_random, []
+        rng, placed = self.np_random, {}
         x, y = rng.uniform(-COMPACT_X, COMPACT_X), rng.uniform(-COMPACT_Y, -COMPACT_Y / 2)
         for i, name in enumerate(OBJECT_BODIES):
             if name not in self.objects:
                 self._place(name, (3.0 + i, 3.0, 0.1))
         for name in rng.permutation([n for n in OBJECT_BODIES if n in self.objects]):
-            radius = RADIUS.get(name, 0.025)
+            radius = RADIUS.get(str(name), 0.025)
             if placed:
-                y += placed[-1][1] + radius + rng.uniform(*COLUMN_GAP)
-            xy = np.array([x + rng.uniform(-COLUMN_DX, COLUMN_DX), y])
-            placed.append((xy, radius))
-            self._place(name, (*xy, REST_Z.get(name, CYLINDER_REST_Z)))
+                y += list(placed.values())[-1][1] + radius + rng.uniform(*COLUMN_GAP)
+            placed[str(name)] = (np.array([x + rng.uniform(-COLUMN_DX, COLUMN_DX), y]), radius)
+            self._place(str(name), (*placed[str(name)][0], REST_Z.get(str(name), CYLINDER_REST_Z)))
         return placed
 
     def step(self, action):

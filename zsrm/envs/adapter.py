@@ -141,6 +141,13 @@ class SceneAdapter:
         except gym.error.Error as err:  # an unknown or unregistered id
             raise SceneAdapterError(f"{self.name}: cannot make env {self.env_id!r}: {err}") from None
 
+    def task_reset_options(self, goal) -> dict | None:
+        """Options for the env's ``reset`` in a goal's training and evaluation scenes (None: none):
+        how a scene starts for this goal, as zsrm's own task scenes start the gripper or pusher by
+        the object the goal moves. ``goal`` has ``relation`` and ``objects`` (phrases, the moved
+        object first). Only the start depends on it; the policy and the reward still see pixels."""
+        return None
+
     def observe(self, observation) -> dict[str, np.ndarray]:
         """The env's observation -> ``{role: image}`` of the roles whose camera it holds."""
         return {role: observation[cam] for role, cam in self.roles.items() if cam in observation}

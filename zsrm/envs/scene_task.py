@@ -107,6 +107,8 @@ class SceneTask(gym.Wrapper):
         return {**info, "oracle_reward": float(success), "is_success": success, "oracle_steps": steps_in_goal}
 
     def reset(self, *, seed=None, options=None):
+        start = self.adapter.task_reset_options(self.goal)  # the adapter's start for this goal, if any
+        options = {**start, **(options or {})} if start else options
         obs, info = self.env.reset(seed=seed, options=options)
         success = self.oracle_success()
         for _ in range(MAX_REDRAWS):  # the env's generator goes on from the seed: the same seed, the same start

@@ -65,6 +65,10 @@ def _own_scene(d: dict) -> str:
     learned = (f"; PPO on \"{ppo['goal']}\", zsrm / oracle / random {ppo['zsrm']['mean']:.1f} / {ppo['oracle']['mean']:.1f} / "
                f"{ppo['random']['mean']:.1f} (the oracle learns little: docs/own-scene.md)" if ppo
                else "; PPO not run (the oracle does not learn its goals yet)")
+    side = d.get("ppo_sideways")
+    if side:
+        learned += (f"; sideways, \"{side['goal']}\" from a column start: zsrm / oracle / random "
+                    f"{side['zsrm']['mean']:.1f} / {side['oracle']['mean']:.1f} / {side['random']['mean']:.1f}")
     return f"labeler {labeler}; reward {rewards}{learned}"
 
 
@@ -310,7 +314,10 @@ OTHER = [
     ("own_scene/*", "the own-scene stages' measurements (the labeler, the reward, each stage's seconds), written by "
      "benchmarks/own_scene.py before it became a call of zsrm own-scene (2026-12-05)"),
     ("own_scene/pilots/**", "runs on the example's goals in settings that did not learn: every object anywhere "
-     "(300k steps); compact scenes with 2 cm pusher steps (500k) (docs/own-scene.md, step 12)"),
+     "(300k steps); compact scenes with 2 cm pusher steps (500k); the sideways goal's first column starts "
+     "(docs/own-scene.md, step 12)"),
+    ("own_scene/sideways/**", "the sideways goal's PPO sweep (python benchmarks/own_scene.py --sideways): its "
+     "summary, curves and trial summaries, gathered into own_scene.json's ppo_sideways"),
     ("own_scene/trials/*", "the trial summaries of benchmarks/own_scene.py's PPO sweep (learning.json, .png)"),
     ("rl/**", "learning runs, Figures 4 and 6 trials, the training-speed profile, pilots and reward-hacking "
      "diagnostics (docs/training.md, docs/training-speed.md)"),
