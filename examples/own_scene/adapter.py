@@ -43,13 +43,15 @@ class OwnScene(SceneAdapter):
 
 class OwnSceneSideways(OwnScene):
     """The same scene, with task scenes for sideways goals (right of, left of): the goal's objects
-    one behind the other, the pusher just beside the one the goal moves, on the side it must be
+    one behind the other, the pusher 6 cm beside the one the goal moves, on the side it must be
     pushed from (as zsrm's pushing scene starts its pusher on the far side of the moved puck).
     From the compact start a sideways goal needs the pusher to go round an object first, and no
     reward learnt it; beside the front object on either side, PPO learnt to push it away from
     the pusher, right half the time (docs/own-scene.md, step 12)."""
 
-    task_env_kwargs = {"start": "column", "step_size": 0.01}
+    # 6 cm from the cylinder: from 1.5 cm (the compact start's) an untrained policy's small steady
+    # drift pushed it across in 45% of the steps (a policy moving +0.05 a step: 32%; here 0)
+    task_env_kwargs = {"start": "column", "step_size": 0.01, "reach": 0.06}
 
     def task_reset_options(self, goal):
         side = {"right_of": "left", "left_of": "right"}.get(goal.relation)

@@ -47,7 +47,8 @@ class OwnSceneEnv(gym.Env):
     start: "anywhere" (objects anywhere on the table, the pusher anywhere along the front edge),
     "compact" (objects near the centre, the pusher just in front of one of them) or "column"
     (objects one behind the other near the centre, the pusher just beside the front one);
-    step_size: metres of pusher target motion per step at |action| = 1.
+    step_size: metres of pusher target motion per step at |action| = 1;
+    reach: metres between the pusher's edge and the object's it starts by (compact, column).
     ``reset(options=...)``: "beside" (a body) starts the pusher by that object instead; "side"
     ("left" or "right") puts it on that side of it in a column.
     """
@@ -56,10 +57,10 @@ class OwnSceneEnv(gym.Env):
     frame_skip = 10  # 10 x 4 ms per step
 
     def __init__(self, cameras=CAMERAS, image_size: int = 64, objects=OBJECT_BODIES, render_mode=None,
-                 start: str = "anywhere", step_size: float = MAX_MOVE):
+                 start: str = "anywhere", step_size: float = MAX_MOVE, reach: float = 0.015):
         if start not in STARTS:
             raise ValueError(f"start must be one of {', '.join(map(repr, STARTS))}, got {start!r}")
-        self.start, self.step_size = start, float(step_size)
+        self.start, self.step_size, self.reach = start, float(step_size), float(reach)
         self.cameras = tuple(cameras)
         for cam in self.cameras:
             if cam not in CAMERAS:
@@ -110,7 +111,7 @@ class OwnSceneEnv(gym.Env):
         start = self.np_random.uniform((-0.2, -0.14), (0.2, -0.11))  # the pusher starts along the front edge
         if self.start != "anywhere":  # ... or just in front of (beside) one of the objects, if nothing is in its way
             xy, r = self._next_to(placed, options or {})
-            gap = r + PUSHER_RADIUS + 0.015
+            gap = r + PUSHER_RADIUS + self.reach
             if self.start == "column":  # on the side options name, else either
                 side = SIDES.get((options or {}).get("side")) or self.np_random.choice((-1.0, 1.0))
                 ready = xy + (side * gap, self.np_random.uniform(-0.01, 0.01))
