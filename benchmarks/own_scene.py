@@ -59,7 +59,7 @@ def sideways(work: Path, out: Path, steps: int, num_cpus: int) -> int:
     meta.setdefault("stages", {})["sweep sideways"] = (f"python benchmarks/own_scene.py --sideways --work {work} "
                                                        f"--out {out}" + (f" --steps {steps}" if steps != 300_000 else "")
                                                        + f" ({gathered['meta']['command']} --root {work / 'rl-sideways'})")
-    files.write_json(out, result)
+    files.write_json(out, result, indent=1)
     print(f"wrote ppo_sideways to {out}")
     return 0
 

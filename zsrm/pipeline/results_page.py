@@ -177,8 +177,10 @@ FIGURES = [
            "place_between place_front place_behind place_inside --distractor-tasks stack "
            "--out results/reward_eval.json"),
     Figure("Full model on an own scene (examples/own_scene): labeler F1 for the goals' relations; binarised reward "
-           "F1 on three goals, zsrm / base; PPO on one goal, 300k steps, 3 seeds",
-           "own_scene.json", _own_scene, "python benchmarks/own_scene.py"),
+           "F1 on three goals, zsrm / base; PPO on two goals (behind, and right of with the v3 learner), 300k steps, "
+           "3 seeds",
+           "own_scene.json", _own_scene, "python benchmarks/own_scene.py; python benchmarks/own_scene.py --sideways "
+           "--work runs/scenes/own_scene"),
     Figure("A scene written from scratch, from its XML alone (examples/slate_scene), through `zsrm own-scene`: "
            "labeler F1 for the goals' relations; the worst object's median Grad-CAM error over half its width; "
            "binarised reward F1 on three goals", "scenes/slate_scene.json", _scene_chain, _recorded_command),
