@@ -602,6 +602,8 @@ def test_the_sideways_scenes_start_in_a_column_with_the_pusher_beside_the_moved_
     assert sides == {False, True}  # without options: beside the front object, either side
     with pytest.raises(ValueError, match="beside: 'bowl' is not on the table"):
         env.reset(seed=0, options={"beside": "bowl"})
+    with pytest.raises(ValueError, match="side must be 'left' or 'right', got 'up'"):
+        env.reset(seed=0, options={"side": "up"})
     env.close()
 
 

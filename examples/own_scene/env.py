@@ -28,8 +28,8 @@ PLACE_X, PLACE_Y = 0.19, 0.12  # objects start within these half extents of the 
 # just in front of one of them, so that a few pushes change which object is where.
 COMPACT_X, COMPACT_Y = 0.08, 0.06
 # start="column": the objects one behind the other (x within 3 mm, 2 to 6 cm between edges), so
-# that neither is left or right of another, and the pusher just beside the front one, on either side:
-# a sideways push of the right object changes which is left of which.
+# that neither is left or right of another, and the pusher beside the front one (or the one reset's
+# options name), on either side: a sideways push of the right object changes which is left of which.
 COLUMN_DX, COLUMN_GAP = 0.003, (0.02, 0.06)
 PUSHER_RADIUS = 0.02
 RADIUS = {"bowl": 0.049}  # other objects: the cylinders' 0.025
@@ -113,7 +113,7 @@ class OwnSceneEnv(gym.Env):
             xy, r = self._next_to(placed, options or {})
             gap = r + PUSHER_RADIUS + self.reach
             if self.start == "column":  # on the side options name, else either
-                side = SIDES.get((options or {}).get("side")) or self.np_random.choice((-1.0, 1.0))
+                side = self._side(options or {})
                 ready = xy + (side * gap, self.np_random.uniform(-0.01, 0.01))
             else:
                 ready = xy + (self.np_random.uniform(-0.01, 0.01), -gap)
@@ -137,7 +137,15 @@ class OwnSceneEnv(gym.Env):
             return min(placed.values(), key=lambda p: p[0][1])
         return list(placed.values())[self.np_random.integers(len(placed))]
 
-    def _scatter(self, compact: bool) -> list:
+    def _side(self, options: dict) -> float:
+        """-1 (left) or +1 (right): ``options["side"]`` if given, else drawn."""
+        if options.get("side") is None:
+            return float(self.np_random.choice((-1.0, 1.0)))
+        if options["side"] not in SIDES:
+            raise ValueError(f"side must be 'left' or 'right', got {options['side']!r}")
+        return SIDES[options["side"]]
+
+    def _scatter(self, compact: bool) -> dict:
         """Place the held objects at random: anywhere, centres 9 cm apart (the bowl's width), or
         compact, 1 cm or more between edges. Returns {body: (xy, radius)} of the placed objects."""
         half, placed = (COMPACT_X, COMPACT_Y) if compact else (PLACE_X, PLACE_Y), {}
@@ -161,12 +169,12 @@ class OwnSceneEnv(gym.Env):
         for i, name in enumerate(OBJECT_BODIES):
             if name not in self.objects:
                 self._place(name, (3.0 + i, 3.0, 0.1))
-        for name in rng.permutation([n for n in OBJECT_BODIES if n in self.objects]):
-            radius = RADIUS.get(str(name), 0.025)
-            if placed:
+        for name in map(str, rng.permutation([n for n in OBJECT_BODIES if n in self.objects])):
+            radius = RADIUS.get(name, 0.025)
+            if placed:  # edge to edge behind the one before
                 y += list(placed.values())[-1][1] + radius + rng.uniform(*COLUMN_GAP)
-            placed[str(name)] = (np.array([x + rng.uniform(-COLUMN_DX, COLUMN_DX), y]), radius)
-            self._place(str(name), (*placed[str(name)][0], REST_Z.get(str(name), CYLINDER_REST_Z)))
+            placed[name] = (np.array([x + rng.uniform(-COLUMN_DX, COLUMN_DX), y]), radius)
+            self._place(name, (*placed[name][0], REST_Z.get(name, CYLINDER_REST_Z)))
         return placed
 
     def step(self, action):
