@@ -39,14 +39,14 @@ def sideways(work: Path, out: Path, steps: int, num_cpus: int) -> int:
     ``out``'s ``ppo_sideways`` (the keys of its ``ppo``)."""
     from zsrm.common import files
     from zsrm.pipeline.learn import Sweep
-    from zsrm.pipeline.own_scene import ppo_cells
+    from zsrm.pipeline.own_scene import SceneChain, ppo_cells
 
     # the sweep's summary and trial files beside the results (results/own_scene/sideways/)
     student, learning = work / "student", out.with_suffix("") / "sideways" / "learning.json"
     if not (student / "training.json").is_file():
         raise SystemExit(f"{work} has no student: run the chain there first (python benchmarks/own_scene.py "
                          f"--work {work} --until eval-reward)")
-    vlm = files.read_json(work / "vlm.json", "the chain's kept VLM")["chosen"]
+    vlm = str(SceneChain.chosen_vlm(work))
     sweep = Sweep(scene=SIDEWAYS_SCENE, tasks=(SIDEWAYS_GOAL,), rewards=("oracle", "zsrm", "random"), seeds=(0, 1, 2),
                   steps=steps, vlm=vlm, reward_model=str(student), root=str(work / "rl-sideways"), num_cpus=num_cpus,
                   config=SIDEWAYS_CONFIG, out=str(learning))

@@ -95,6 +95,12 @@ class OwnSceneEnv(gym.Env):
                 self.model.geom_contype[g] = self.model.geom_conaffinity[g] = 0
             self.model.body_gravcomp[body] = 1.0
 
+    def _park_absent(self):
+        """Absent objects off the table, each at its own spot."""
+        for i, name in enumerate(OBJECT_BODIES):
+            if name not in self.objects:
+                self._place(name, (3.0 + i, 3.0, 0.1))
+
     def _place(self, name: str, xyz):
         adr = self.model.jnt_qposadr[self.model.body_jntadr[self._body(name)]]
         self.data.qpos[adr:adr + 3] = xyz
@@ -149,9 +155,9 @@ class OwnSceneEnv(gym.Env):
         """Place the held objects at random: anywhere, centres 9 cm apart (the bowl's width), or
         compact, 1 cm or more between edges. Returns {body: (xy, radius)} of the placed objects."""
         half, placed = (COMPACT_X, COMPACT_Y) if compact else (PLACE_X, PLACE_Y), {}
-        for i, name in enumerate(OBJECT_BODIES):
+        self._park_absent()
+        for name in OBJECT_BODIES:
             if name not in self.objects:
-                self._place(name, (3.0 + i, 3.0, 0.1))
                 continue
             radius = RADIUS.get(name, 0.025)
             for _ in range(200):
@@ -166,9 +172,7 @@ class OwnSceneEnv(gym.Env):
         """Place the held objects one behind the other in a random order near the table's centre."""
         rng, placed = self.np_random, {}
         x, y = rng.uniform(-COMPACT_X, COMPACT_X), rng.uniform(-COMPACT_Y, -COMPACT_Y / 2)
-        for i, name in enumerate(OBJECT_BODIES):
-            if name not in self.objects:
-                self._place(name, (3.0 + i, 3.0, 0.1))
+        self._park_absent()
         for name in map(str, rng.permutation([n for n in OBJECT_BODIES if n in self.objects])):
             radius = RADIUS.get(name, 0.025)
             if placed:  # edge to edge behind the one before

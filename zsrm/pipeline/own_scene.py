@@ -269,7 +269,9 @@ class SceneChain:
                     "where",
             "checks": {str(s): c for s, c in checks.items()}}, indent=1)
 
-    def chosen_vlm(self, out: Path) -> Path:
+    @staticmethod
+    def chosen_vlm(out: Path) -> Path:
+        """The VLM the ``vlm`` stage kept in the chain folder ``out``."""
         return Path(files.read_json(out / "vlm.json", "the kept VLM")["chosen"])
 
     # --- gates -----------------------------------------------------------------------------
