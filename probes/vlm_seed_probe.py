@@ -8,6 +8,13 @@ the labeler's F1. Writes one JSON row per (zoom, seed).
 
     python probes/vlm_seed_probe.py --scene examples.slate_scene.adapter:SlateScene \\
         --seeds 0 1 2 --zooms 0 0.5 --out results/side/scenes/slate_vlm_seeds.json
+
+The table of docs/own-scene.md from such files, each with its chain's summary (the objects'
+half widths):
+
+    python probes/vlm_seed_probe.py --table results/side/scenes/slate_vlm_seeds.json \
+        results/scenes/slate_scene.json results/side/scenes/own_scene_vlm_seeds.json \
+        results/scenes/own_scene.json
 """
 from __future__ import annotations
 
@@ -21,13 +28,20 @@ RELATIONS = ("left_of", "in_front_of", "in_between", "close_to")
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scene", required=True)
+    parser.add_argument("--table", nargs="+", metavar="FILE", help="print the markdown table of pairs of "
+                        "(this probe's file, its scene's chain summary) and stop")
+    parser.add_argument("--scene")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--zooms", type=float, nargs="+", default=[0.0, 0.5])
     parser.add_argument("--work", default="runs/vlm-probe")
     parser.add_argument("--eval-images", type=int, default=1000)
-    parser.add_argument("--out", required=True)
+    parser.add_argument("--out")
     args = parser.parse_args(argv)
+    if args.table:
+        print(table(args.table[0::2], args.table[1::2]))
+        return 0
+    if not (args.scene and args.out):
+        parser.error("give --scene and --out (or --table)")
     import torch
 
     from zsrm.cli import main as zsrm
@@ -73,6 +87,29 @@ def main(argv=None) -> int:
         "median_error_px": "evaluation only: against the true pixels of the held-out data, role.object"}}, indent=1)
     print(f"wrote {args.out}")
     return 0
+
+
+def table(probes, chains) -> str:
+    """Markdown rows: per VLM its masking floor, its worst object as a share of half its width,
+    whether every object is within half its width, and the labeler's F1."""
+    from zsrm.common.files import read_json
+
+    lines = ["| scene | zoom | seed | lowest masking agreement | worst: error / half width (px) | all within | "
+             "labeler left of / in front of / in between |", "|---|---|---|---|---|---|---|"]
+    for probe, chain in zip(probes, chains):
+        rows, loc = read_json(probe)["rows"], read_json(chain)["localisation"]
+        half = {f"{role}.{obj}": cell["half_width_px"] for obj, cells in loc.items() for role, cell in cells.items()}
+        for r in rows:
+            share = {k: r["median_error_px"][k] / half[k] for k in half}
+            worst = max(share, key=share.get)
+            role, obj = worst.split(".", 1)
+            error = r["median_error_px"][worst]
+            where = (f"never located ({obj}, {role})" if error == float("inf") else
+                     f"{error:.1f} / {half[worst]:.1f} ({obj}, {role})")
+            f1 = " / ".join(f"{r['labeler_f1'][k]:.2f}" for k in ("left_of", "in_front_of", "in_between"))
+            lines.append(f"| {Path(chain).stem} | {r['zoom']:g} | {r['seed']} | {r['masking_min']:.2f} | {where} | "
+                         f"{'yes' if max(share.values()) <= 1 else 'no'} | {f1} |")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -38,6 +38,13 @@ def test_no_relative_link_is_broken(page):
     assert not broken, f"{page.relative_to(ROOT)}: broken links: {broken}"
 
 
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_pasted_error_output(page):
+    """A table made by a script that failed leaves its traceback in the page instead."""
+    text = page.read_text()
+    assert "Traceback (most recent call last)" not in text, f"{page.relative_to(ROOT)} holds a traceback"
+
+
 def test_every_docs_page_is_linked_from_the_readme():
     linked = {(ROOT / link.partition("#")[0]).resolve() for link in _relative_links(ROOT / "README.md")}
     missing = [p.name for p in (ROOT / "docs").glob("*.md") if p.resolve() not in linked]
