@@ -69,6 +69,8 @@ def main(argv=None) -> int:
     parser.add_argument("--work", default="runs/own-scene", help="folder of every stage's data, models and report")
     parser.add_argument("--out", default="results/own_scene.json")
     parser.add_argument("--steps", type=int, default=300_000, help="env steps of each PPO trial")
+    parser.add_argument("--config", default="cpu", help="the PPO goal's learner preset (zsrm train --config); "
+                        "results/own_scene.json's ppo was made with v2, the default then")
     parser.add_argument("--until", default=None, help="stop after this stage (e.g. eval-reward: no PPO)")
     parser.add_argument("--dry-run", action="store_true", help="print the stages and stop")
     parser.add_argument("--sideways", action="store_true", help="train the sideways goal (see above) and add "
@@ -80,7 +82,7 @@ def main(argv=None) -> int:
     from zsrm.cli import main as zsrm
 
     command = ["own-scene", "--scene", SCENE, "--goals", *GOALS, "--out", args.work, "--results", args.out,
-               "--ppo-goal", PPO_GOAL, "--ppo-steps", str(args.steps)]
+               "--ppo-goal", PPO_GOAL, "--ppo-steps", str(args.steps), "--ppo-config", args.config]
     command += ["--until", args.until] if args.until else []
     command += ["--dry-run"] if args.dry_run else []
     return zsrm(command)

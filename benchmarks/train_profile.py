@@ -40,13 +40,14 @@ import torch  # noqa: E402
 
 from zsrm.common.files import write_json  # noqa: E402
 
-# v1 to the default, one lever a rung (each rung's settings on top of the rungs before it)
+# v1 to v2, one lever a rung (each rung's settings on top of the rungs before it); the default
+# since (v3) changed the action noise and the evaluation, not what a step costs
 LADDER = (
     ("v1", {}),
     ("32 px policy views", {"trunk_size": 32, "pixel_size": 32}),
     ("action repeat 4 (gamma, lambda per decision to match)", {"action_repeat": 4, "gamma": 0.96, "gae_lambda": 0.9}),
     ("16 envs x 32 steps, 4 epochs of minibatch 32", {"n_envs": 16, "n_steps": 32, "n_epochs": 4, "batch_size": 32}),
-    ("learning rate annealed to 0 (the default)", {"anneal_lr": True}),
+    ("learning rate annealed to 0 (v2)", {"anneal_lr": True}),
 )
 
 # Parts that start their own branch of the tree: their inner parts are theirs.

@@ -78,3 +78,19 @@ def test_tiny_cpu_scale_runs_every_stage(tmp_path):
     for src in re.findall(r'<img class="figure" src="([^"]+)"', page):
         with Image.open(report / src) as img:
             img.verify()
+
+
+def test_the_demo_learner_is_named_and_its_expected_range_read_from_its_sweep():
+    from zsrm.pipeline.report import LEARNING_BY_CONFIG, expected_range
+    from zsrm.pipeline.reproduce import SCALES, demo_stages
+
+    by_name = {c: {s.name: s for s in demo_stages(SCALES["demo"], "scene", c)} for c in ("cpu", "v2")}
+    assert by_name["cpu"]["policy_zsrm"].config["eval_deterministic"] is True
+    assert "log_std_init" not in by_name["v2"]["policy_zsrm"].config  # v2's noise, as its runs wrote it
+    assert by_name["v2"]["policy_zsrm"].config["eval_deterministic"] is False
+    assert by_name["v2"]["policy_zsrm"].command.endswith("--config v2")
+    spread = expected_range("place_right", learning=LEARNING_BY_CONFIG["cpu"])
+    committed = json.loads(LEARNING_BY_CONFIG["cpu"].read_text())["place_right"]["zsrm"]["final_per_seed"]
+    assert spread["seeds"] == len(committed) and spread["seeds_min"] == round(min(committed), 1)
+    with pytest.raises(ValueError, match="--config is for the demo scales"):
+        Reproduce(scale="cpu", config="v2").run()

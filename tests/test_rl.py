@@ -119,7 +119,8 @@ def test_resume_refuses_other_settings(tmp_path):
 
 
 def test_saved_policy_reloads_and_acts_the_same(tmp_path):
-    cfg = TrainConfig(goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128, **TINY)
+    cfg = TrainConfig(goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128,
+                      eval_deterministic=False, **TINY)
     summary = train(cfg, tmp_path, progress=False)
     # the final evaluation both ways: final_* is the one eval_deterministic names (sampled here)
     assert set(summary["final_by_actions"]) == {"mean", "sampled"}

@@ -34,6 +34,29 @@ def test_v1_preset_is_the_configuration_of_the_older_committed_trials():
         assert preset("v1", **same).to_dict() == committed, path.name
 
 
+@pytest.mark.parametrize("folder, name", [("rl/trials", "v2"), ("rl/v3/trials", "cpu"), ("rl/v3/trials", "v3")])
+def test_presets_are_the_configurations_of_their_committed_trials(folder, name):
+    """v2 (the default from 2026-12-04 to 2026-12-06) is the v2 sweeps' learner; the default is v3's."""
+    trials = sorted((ROOT / "results" / folder).glob("*.json"))
+    assert len(trials) >= 45
+    for path in trials:
+        committed = json.loads(path.read_text())["config"]
+        same = {k: committed[k] for k in ("goal", "reward", "seed", "steps", "reward_model", "vlm", "start")
+                if k in committed}
+        assert preset(name, **same).to_dict() == committed, path.name
+
+
+def test_a_config_written_before_the_v3_default_reads_as_v2():
+    old = preset("v2", goal="stack", reward="oracle")
+    written = old.to_dict()
+    assert "log_std_init" not in written  # as the v2 runs wrote it
+    del written["eval_deterministic"]  # runs older still never wrote it
+    assert TrainConfig.from_dict(written) == old
+    new = TrainConfig(goal="stack", reward="oracle")
+    assert (new.log_std_init, new.eval_deterministic) == (-1.0, True)
+    assert TrainConfig.from_dict(new.to_dict()) == new
+
+
 def test_default_differs_from_v1_and_an_old_run_reads_as_v1():
     new, old = TrainConfig(), preset("v1")
     assert (new.action_repeat, new.trunk_size, new.pixel_size) != (old.action_repeat, old.trunk_size, old.pixel_size)
@@ -107,12 +130,12 @@ def test_profile_timers_count_exclusive_time_under_their_root(monkeypatch):
                                     "evaluation": 3, "rollout_other": 9 - 1 - 5}
 
 
-def test_profile_ladder_goes_from_v1_to_the_default():
+def test_profile_ladder_goes_from_v1_to_v2():
     import train_profile
 
     rungs = train_profile.ladder_settings()
     assert rungs[0][1] == PRESETS["v1"]
-    assert TrainConfig(**rungs[-1][1]) == TrainConfig()  # the last rung is the default
+    assert TrainConfig(**rungs[-1][1]) == preset("v2")  # the last rung: v2, whose speed the default (v3) has
 
 
 def test_profile_and_speed_benchmarks_run_a_tiny_train(tmp_path, monkeypatch):

@@ -39,6 +39,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -84,6 +85,7 @@ class SceneChain:
     ppo_goal: str | None = None  # also train PPO on this goal, with the oracle, zsrm and random rewards
     ppo_seeds: tuple[int, ...] = (0, 1, 2)  # PPO seeds
     ppo_steps: int = 300_000  # env steps per PPO run
+    ppo_config: Literal["cpu", "paper", "v3", "v2", "v1"] = "cpu"  # the PPO runs' TrainConfig preset (zsrm train --config)
     labeler_floor: float = 0.85  # gate: the labeler's F1 on each relation the goals use
     reward_floor: float = 0.85  # gate: each goal's binarised reward F1
     keep_going: bool = False  # run every stage even after a gate fails
@@ -228,7 +230,8 @@ class SceneChain:
             stages.append(("sweep", lambda: Sweep(scene=scene, tasks=(self.ppo_goal,), rewards=("oracle", "zsrm", "random"),
                                                   seeds=tuple(self.ppo_seeds), steps=self.ppo_steps, vlm=vlm(),
                                                   reward_model=str(out / "student"), root=str(out / "rl"),
-                                                  num_cpus=self.num_cpus, out=str(out / "learning.json")).run(),
+                                                  num_cpus=self.num_cpus, config=self.ppo_config,
+                                                  out=str(out / "learning.json")).run(),
                            out / "learning.json"))
         return stages
 

@@ -94,7 +94,7 @@ window.addEventListener("load", function () {
 
 
 def write_report(folder: Path, scale: str, vlm: str, log: list[dict], workdir: Path, wall_s: float,
-                 demo_task: str | None = None) -> Path:
+                 demo_task: str | None = None, config: str = "cpu") -> Path:
     """Write the report of a ``zsrm reproduce`` run; for a demo-kind scale (``demo_task``, the task it
     trains) also ``results/demo.json``."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -107,7 +107,7 @@ def write_report(folder: Path, scale: str, vlm: str, log: list[dict], workdir: P
                  [[e["stage"], e["what"], f"{e['seconds']:.0f}", "yes" if e.get("cached") else "no", e["command"]]
                   for e in log])
     if demo_task is not None:
-        result = demo_result(log, wall_s, demo_task)
+        result = demo_result(log, wall_s, demo_task, config)
         write_json(RESULTS / "demo.json" if scale == "demo" else folder / "demo.json", result)
         demo_section(report, result, workdir)
     else:
@@ -116,7 +116,7 @@ def write_report(folder: Path, scale: str, vlm: str, log: list[dict], workdir: P
     return report.write(f"zsrm report ({scale} scale)")
 
 
-def demo_result(log: list[dict], wall_s: float, task: str) -> dict:
+def demo_result(log: list[dict], wall_s: float, task: str, config: str = "cpu") -> dict:
     """``results/demo.json``: the demo's learning signal (zsrm-trained policy against random)."""
     by_stage = {entry["stage"]: entry["result"] for entry in log}
     trained, rand = by_stage["policy_zsrm"], by_stage["policy_random"]
@@ -126,14 +126,19 @@ def demo_result(log: list[dict], wall_s: float, task: str) -> dict:
             "zsrm_policy_env_steps": trained["env_steps"], "episodes": trained["final_episodes"],
             "stage_seconds": {e["stage"]: e["seconds"] for e in log},
             "stages_cached": [e["stage"] for e in log if e.get("cached")],
-            "expected_range": expected_range(task)}
+            "config": config, "expected_range": expected_range(task, learning=LEARNING_BY_CONFIG.get(config))}
 
 
-def expected_range(task: str, reward: str = "zsrm", learning: Path = RESULTS / "rl" / "learning.json") -> dict | None:
+# The committed sweep of each learner preset a demo can run: where its seeds ended.
+LEARNING_BY_CONFIG = {"cpu": RESULTS / "rl" / "v3" / "learning.json", "v3": RESULTS / "rl" / "v3" / "learning.json",
+                      "v2": RESULTS / "rl" / "learning.json"}
+
+
+def expected_range(task: str, reward: str = "zsrm", learning: Path | None = LEARNING_BY_CONFIG["cpu"]) -> dict | None:
     """Where a run of ``task`` with ``reward`` is expected to end: the committed seeds' mean +- two
-    standard deviations (results/rl/learning.json). Float results move across CPUs, so another
-    machine's run lands somewhere in the seeds' spread, not on one number."""
-    if not learning.is_file():
+    standard deviations (the default learner's: results/rl/v3/learning.json). Float results move
+    across CPUs, so another machine's run lands somewhere in the seeds' spread, not on one number."""
+    if learning is None or not learning.is_file():
         return None
     cell = json.loads(learning.read_text()).get(task, {}).get(reward)
     finals = (cell or {}).get("final_per_seed") or []

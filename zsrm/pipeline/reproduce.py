@@ -85,11 +85,13 @@ def run_stages(stages: list[Stage], workdir: Path) -> list[dict]:
     return log
 
 
-def demo_stages(scale: dict, vlm: str) -> list[Stage]:
-    """The demo scale: shipped models, one zsrm-trained policy and a random one on one task."""
-    from zsrm.rl.config import TrainConfig
+def demo_stages(scale: dict, vlm: str, config: str = "cpu") -> list[Stage]:
+    """The demo scale: shipped models, one zsrm-trained policy and a random one on one task, with
+    the learner preset ``config`` (zsrm train --config)."""
+    from zsrm.rl.config import PRESETS, TrainConfig
 
-    task, steps, extra = scale["task"], scale["steps"], scale.get("train", {})
+    task, steps, extra = scale["task"], scale["steps"], {**PRESETS[config], **scale.get("train", {})}
+    flag = f" --config {config}" if config != "cpu" else ""
     train_cfg = TrainConfig(goal=task, reward="zsrm", seed=0, steps=steps, vlm=vlm, **extra)
     random_cfg = TrainConfig(goal=task, reward="random", seed=0, vlm=vlm, **extra)
 
@@ -125,9 +127,9 @@ def demo_stages(scale: dict, vlm: str) -> list[Stage]:
         Stage("models", "load the shipped scene VLM and student reward model", {"vlm": vlm, "reward_model": "student"},
               shipped, f"zsrm eval-reward --zsrm student  # the shipped student; zsrm pretrain-vlm builds the VLM"),
         Stage("policy_zsrm", f"train PPO with the zsrm reward on {task} for {steps} env steps",
-              train_cfg.to_dict(), train_policy, f"zsrm train --goal {task} --reward zsrm --seed 0 --steps {steps}"),
+              train_cfg.to_dict(), train_policy, f"zsrm train --goal {task} --reward zsrm --seed 0 --steps {steps}{flag}"),
         Stage("policy_random", f"a uniform random policy on {task}", random_cfg.to_dict(), random_policy,
-              f"zsrm train --goal {task} --reward random --seed 0"),
+              f"zsrm train --goal {task} --reward random --seed 0{flag}"),
         Stage("gifs", "one episode of each policy as a GIF (the trained one's first success of seeds 0-9)",
               {"task": task, "steps": steps, "pick": "first success"}, gifs,
               f"zsrm rollout RUN/policy --episodes 1 --gif zsrm_policy.gif"),
@@ -246,19 +248,23 @@ class Reproduce:
     report: str = "reports/demo"  # the report folder (index.html and README.md)
     vlm: str = "scene"  # the VLM: scene (offline), or open_clip:RN50 etc. when you have the weights
     address: str | None = None  # a Ray cluster for the sweep (cpu and paper scales)
+    config: Literal["cpu", "v3", "v2"] = "cpu"  # demo scales: the policy's learner preset (cpu, the default: v3 since 2026-12-06; v2: the demo before then)
 
     def run(self) -> int:
         from zsrm.pipeline.report import write_report
 
+        if self.config != "cpu" and not is_demo(self.scale):
+            raise ValueError(f"--config is for the demo scales; the {self.scale} scale builds with the default learner")
         workdir = Path(self.workdir or f"runs/reproduce/{self.scale}")
         check_writable(workdir, folder=True)
         check_writable(Path(self.report), folder=True)
         scale = SCALES[self.scale]
         start = time.time()
-        stages = demo_stages(scale, self.vlm) if is_demo(self.scale) else cpu_stages(scale, self.vlm, self.address)
+        stages = (demo_stages(scale, self.vlm, self.config) if is_demo(self.scale)
+                  else cpu_stages(scale, self.vlm, self.address))
         log = run_stages(stages, workdir)
         wall = time.time() - start
         demo_task = SCALES[self.scale]["task"] if is_demo(self.scale) else None
-        index = write_report(Path(self.report), self.scale, self.vlm, log, workdir, wall, demo_task)
+        index = write_report(Path(self.report), self.scale, self.vlm, log, workdir, wall, demo_task, self.config)
         print(f"report: {index.resolve()}")
         return 0

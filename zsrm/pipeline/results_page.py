@@ -141,7 +141,7 @@ def _scripted(d: dict) -> str:
 
 LEARNING = "zsrm sweep --tasks stack place_right push_close --rewards oracle zsrm random --seeds 0 1 2 3 4"
 FIGURE6 = ("zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity "
-           "random --seeds 0 1 2 --out results/rl/summary.json")
+           "random --seeds 0 1 2 --out results/rl/summary.json --config v2")
 
 FIGURES = [
     # the paper's figures
@@ -193,7 +193,7 @@ FIGURES = [
            "LIBERO's BDDL `On` predicate (docs/benchmarks.md)", "benchmarks/libero.json", _benchmark,
            _recorded_command),
     Figure("Learning from pixels, default configuration, final oracle episode reward", "rl/learning.json",
-           _learning, LEARNING + " --out results/rl/learning.json"),
+           _learning, LEARNING + " --out results/rl/learning.json --config v2"),
     Figure("Table 2 in colour frames (the paper's setting): the paper's three, behaviour cloning",
            "multitask/table2_colour.json", _colour,
            "zsrm eval-multitask --policies runs/multitask/distill-colour --seeds 50 "

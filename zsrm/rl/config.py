@@ -71,10 +71,10 @@ class TrainConfig:
     """entropy bonus"""
     clip_range: float = 0.2
     """PPO clip range"""
-    log_std_init: float = 0.0
+    log_std_init: float = -1.0
     """initial log standard deviation of the policy's Gaussian actions (stable-baselines3's
-    log_std_init; 0: a standard deviation of 1 over actions in [-1, 1]; v3's -1: 0.37, so early
-    grasps and placements are not shaken loose by the noise)"""
+    log_std_init; -1: 0.37 over actions in [-1, 1], so early grasps and placements are not shaken
+    loose by the noise; 0, a standard deviation of 1, until 2026-12-06: --config v2)"""
     target_kl: float = 0.0
     """stop an update's epochs at a minibatch whose KL from the rollout's policy passes 1.5x this
     (0: never; stable-baselines3's target_kl)"""
@@ -86,10 +86,10 @@ class TrainConfig:
     """environment steps between evaluations"""
     eval_episodes: int = 10
     """episodes per evaluation, on separate envs with their own seeds"""
-    eval_deterministic: bool = False
-    """evaluate the policy's mean action, as a deployed policy acts (v3), instead of sampling it (the
-    grip's hysteresis makes an early mean action that never crosses a threshold score 0 while the
-    sampled policy succeeds); a run's summary has both (final_by_actions)"""
+    eval_deterministic: bool = True
+    """evaluate the policy's mean action, as a deployed policy acts, instead of sampling it (sampled
+    until 2026-12-06: --config v2; the grip's hysteresis makes an early mean action that never crosses
+    a threshold score 0 while the sampled policy succeeds); a run's summary has both (final_by_actions)"""
     checkpoint_every: int = 20_000
     """environment steps between checkpoints a killed run resumes from"""
     threads: int = 1
@@ -116,7 +116,8 @@ class TrainConfig:
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
-    LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False}
+    LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
+                       "eval_deterministic": False}
 
     def __post_init__(self):
         if self.reward not in REWARDS:
@@ -234,16 +235,20 @@ def goal_relation(goal: str, scene: str | None = None) -> str | None:
     return task.relation if task is not None else None
 
 
+# The old defaults stay by name: a committed result's command names the preset it was made with.
+SAMPLED_V2 = {"log_std_init": 0.0, "eval_deterministic": False}
 PRESETS: dict[str, dict] = {
-    "cpu": {},
+    "cpu": {},  # the default (v3 since 2026-12-06)
     "paper": {"steps": 200_000, "n_envs": 16, "n_steps": 256, "batch_size": 512},
-    # issue 52's learner (docs/training.md): the policy's actions start with a standard deviation of
-    # 0.37 instead of 1, and it is evaluated by its mean action
+    # issue 52's learner (docs/training.md), the default since 2026-12-06: the policy's actions start
+    # with a standard deviation of 0.37 instead of 1, and it is evaluated by its mean action
     "v3": {"log_std_init": -1.0, "eval_deterministic": True},
+    # the default from 2026-12-04 to 2026-12-06 (action noise 1, sampled evaluation)
+    "v2": dict(SAMPLED_V2),
     # the default until 2026-12-04, behind the results committed before then (64 px policy views,
     # action repeat 2, 10 epochs): about a fifth of the default's speed (results/ppo_speed.json)
     "v1": {"trunk_size": 0, "pixel_size": 0, "action_repeat": 2, "n_epochs": 10, "batch_size": 128, "n_envs": 8,
-           "n_steps": 128, "gamma": 0.98, "gae_lambda": 0.95, "anneal_lr": False},
+           "n_steps": 128, "gamma": 0.98, "gae_lambda": 0.95, "anneal_lr": False, **SAMPLED_V2},
 }
 
 
