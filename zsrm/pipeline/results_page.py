@@ -293,6 +293,10 @@ SIDE = [
     ("side/scenes/own_scene_8k_images.json", "the first example through zsrm own-scene with 8000 exploration "
      "images and 4000 student steps (the shipped student's recipe; its VLM stage copied from the default run, so "
      "its wall time leaves that stage out): not better than the default on the left-of goal"),
+    ("side/scenes/own_scene_a32639f_rerun.json", "the code that wrote results/own_scene.json (a32639f) rerun on "
+     "this machine: the same numbers as own_scene_seed0.json, not the committed file's (another CPU)"),
+    ("side/scenes/own_scene_student_ensembles.json", "the first example's students alone and their mean margins "
+     "in twos and threes (probes/student_ensemble.py)"),
     ("side/scenes/own_scene_seed0.json", "the first example through zsrm own-scene with seed 0 alone and no zoomed "
      "views: the VLM results/own_scene.json was made with"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
