@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from zsrm.rewards.vice import GoalClassifier, VICEReward, fit_goal_classifier
+from zsrm.rewards.vice import GoalClassifier, OnlineVICEReward, VICEReward, fit_goal_classifier
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.curiosity import ICM, VecCuriosity
 from zsrm.rl.envs import make_vec
@@ -33,6 +33,33 @@ def test_goal_classifier_learns_saves_and_reloads(tmp_path):
 def test_goal_classifier_needs_both_classes():
     with pytest.raises(ValueError, match="goal and non-goal"):
         fit_goal_classifier(np.zeros((4, 32, 32, 3), np.uint8), np.ones(4, bool), image_size=32)
+
+
+def test_online_vice_stops_paying_for_a_frame_the_policy_keeps_reaching_that_only_looks_like_the_goal():
+    rng = np.random.default_rng(0)
+    frames = rng.integers(0, 60, (40, 32, 32, 3), dtype=np.uint8)
+    labels = np.arange(40) % 2 == 0
+    frames[labels, 10:20, 10:20] = 250  # the goal: a bright square in the middle
+    clf = fit_goal_classifier(frames, labels, image_size=32, steps=80, seed=0)
+    fake = frames[~labels][:8].copy()
+    fake[:, 10:20, 10:20] = 250
+    fake[:, :4] = 200  # ... and a bright bar the true goal frames never show
+    saved = []
+    reward = OnlineVICEReward(clf, "tilted", frames[labels], frames[~labels], update_every=16, steps=30, memory=64,
+                              batch_size=32, seed=0, on_update=saved.append)
+    assert reward({"tilted": fake}, "a goal").all()  # fooled at first
+    for _ in range(12):  # the policy keeps reaching it: 96 frames, 6 updates
+        reward({"tilted": fake}, "a goal")
+    assert reward.updates == 6 and len(saved) == 6 and saved[-1] is clf
+    assert not reward({"tilted": fake}, "a goal").any()
+    assert reward({"tilted": frames[labels]}, "a goal").mean() >= 0.9  # the true goal still pays
+
+
+def test_vice_updates_are_for_the_vice_reward_and_unwritten_when_off():
+    assert "vice_update_every" not in TrainConfig(goal="stack", reward="vice").to_dict()
+    assert TrainConfig(goal="stack", reward="vice", vice_update_every=4000).to_dict()["vice_update_every"] == 4000
+    with pytest.raises(ValueError, match="vice_update_every is for the vice reward"):
+        TrainConfig(goal="stack", reward="oracle", vice_update_every=4000)
 
 
 def test_icm_learns_what_the_action_did():

@@ -29,6 +29,21 @@ def test_a_few_hundred_ppo_steps_with_each_reward(tmp_path, reward):
     assert len((tmp_path / "eval.csv").read_text().splitlines()) == 3
 
 
+def test_online_vice_keeps_training_its_classifier_in_a_run(tmp_path):
+    import torch
+
+    from zsrm.rewards.vice import GoalClassifier
+
+    cfg = TrainConfig(goal="push_close", reward="vice", vice_update_every=128, steps=256, eval_every=256,
+                      checkpoint_every=256, **TINY)
+    train(cfg, tmp_path, progress=False)
+    fitted, latest = (GoalClassifier.from_folder(tmp_path / name) for name in ("vice", "vice_online"))
+    frames = np.random.default_rng(0).integers(0, 255, (4, 64, 64, 3), dtype=np.uint8)
+    with torch.no_grad():
+        assert not torch.allclose(fitted(frames), latest(frames))  # updated on the policy's frames
+    assert json.loads((tmp_path / "config.json").read_text())["vice_update_every"] == 128
+
+
 def test_a_finished_run_is_not_trained_again(tmp_path):
     cfg = TrainConfig(goal="push_close", reward="random")
     first = train(cfg, tmp_path, progress=False)

@@ -73,17 +73,24 @@ def fit_goal_classifier(images: np.ndarray, labels: np.ndarray, image_size: int 
     images, labels = check_images(images), np.asarray(labels, bool)
     if len(images) != len(labels):
         raise ValueError(f"{len(images)} frames but {len(labels)} labels")
-    pos, neg = np.flatnonzero(labels), np.flatnonzero(~labels)
-    if not len(pos) or not len(neg):
-        raise ValueError(f"need goal and non-goal frames, got {len(pos)} goal and {len(neg)} other frames")
+    if not labels.any() or labels.all():
+        raise ValueError(f"need goal and non-goal frames, got {int(labels.sum())} goal and {int((~labels).sum())} "
+                         "other frames")
     torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
     model = GoalClassifier(GoalClassifierConfig(image_size=image_size))
     opt = torch.optim.Adam(model.parameters(), lr=lr)
+    return train_steps(model, opt, images[labels], images[~labels], steps, batch_size, np.random.default_rng(seed))
+
+
+def train_steps(model: GoalClassifier, opt, positives: np.ndarray, negatives: np.ndarray, steps: int,
+                batch_size: int, rng: np.random.Generator) -> GoalClassifier:
+    """``steps`` Adam steps on batches of half positives, half negatives; the model left in eval mode."""
     target = torch.cat([torch.ones(batch_size // 2), torch.zeros(batch_size - batch_size // 2)])
+    model.train()
     for _ in range(steps):
-        idx = np.concatenate([rng.choice(pos, batch_size // 2), rng.choice(neg, batch_size - batch_size // 2)])
-        loss = nn.functional.binary_cross_entropy_with_logits(model(images[idx]), target)
+        batch = np.concatenate([positives[rng.integers(len(positives), size=batch_size // 2)],
+                                negatives[rng.integers(len(negatives), size=batch_size - batch_size // 2)]])
+        loss = nn.functional.binary_cross_entropy_with_logits(model(batch), target)
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -102,3 +109,46 @@ class VICEReward(RewardModel):
     def compute(self, observations: Mapping[str, np.ndarray] | None, goal: str,
                 infos: Sequence[dict] | None) -> np.ndarray:
         return (self.classifier(self.images(observations)) > 0).float().numpy()
+
+
+class OnlineVICEReward(VICEReward):
+    """VICE as Fu et al. (2018) train it: the classifier keeps learning while the policy trains.
+
+    The frames it scores are the policy's. Every ``update_every`` of them it takes ``steps`` Adam
+    steps on batches of half true goal frames (``positives``, oracle-labelled) and half negatives:
+    the non-goal frames it was fitted on and the policy's latest ``memory`` frames. A frame the
+    policy keeps reaching that only looks like the goal then stops paying. ``on_update(classifier)``
+    runs after each update (the run keeps the latest classifier, so a resumed run starts from it;
+    the policy's frames and the optimiser's moments start afresh)."""
+
+    def __init__(self, classifier: GoalClassifier, camera: str, positives: np.ndarray, negatives: np.ndarray,
+                 update_every: int, steps: int = 50, memory: int = 2048, batch_size: int = 128, lr: float = 1e-3,
+                 seed: int = 0, on_update=None):
+        super().__init__(classifier, camera)
+        if update_every < 1 or steps < 1 or memory < 1:
+            raise ValueError(f"update_every, steps and memory must be >= 1, got {update_every}, {steps}, {memory}")
+        self.positives, self.negatives = check_images(positives), check_images(negatives)
+        self.update_every, self.steps, self.batch_size = int(update_every), int(steps), int(batch_size)
+        self.memory = np.zeros((int(memory), *self.negatives.shape[1:]), np.uint8)
+        self.stored = self.seen = 0
+        self.updates = 0
+        self.rng = np.random.default_rng(seed)
+        self.opt = torch.optim.Adam(classifier.parameters(), lr=lr)
+        self.on_update = on_update
+
+    def compute(self, observations, goal, infos) -> np.ndarray:
+        reward = super().compute(observations, goal, infos)
+        frames = self.images(observations)
+        for frame in frames:  # a ring of the policy's latest frames
+            self.memory[self.stored % len(self.memory)] = frame
+            self.stored += 1
+        self.seen += len(frames)
+        if self.seen >= self.update_every:
+            self.seen -= self.update_every
+            policy = self.memory[:min(self.stored, len(self.memory))]
+            train_steps(self.classifier, self.opt, self.positives, np.concatenate([self.negatives, policy]),
+                        self.steps, self.batch_size, self.rng)
+            self.updates += 1
+            if self.on_update is not None:
+                self.on_update(self.classifier)
+        return reward

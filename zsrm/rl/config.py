@@ -99,6 +99,10 @@ class TrainConfig:
     open fingers around it, so that closing them grasps it (around); auto: around for stacking
     goals (on top of, below), whose oracle reward stayed 0 for 300k steps from above, and for inside
     of (a block lifted into the box; from above 0 in 300k steps with zsrm), else above"""
+    vice_update_every: int = 0
+    """--reward vice: every this many env steps the goal classifier takes 50 Adam steps with the
+    policy's latest frames as negatives beside the true goal frames, as Fu et al. (2018) train VICE
+    (zsrm.rewards.vice.OnlineVICEReward); 0: fitted once before training, as until 2026-12-06"""
     choice: bool = False
     """stacking goals: the scene also holds a third block (the first training colour the goal does not
     name) in line with the goal's, on the far side of the moved block from its base, so the policy
@@ -113,7 +117,7 @@ class TrainConfig:
     # Settings added after runs were committed: written only when changed, so that a finished
     # run made before they existed still matches its configuration.
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0,
-             "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0}
+             "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
@@ -128,6 +132,9 @@ class TrainConfig:
                      "eval_episodes", "checkpoint_every", "threads", "keypoints"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.vice_update_every < 0 or (self.vice_update_every and self.reward != "vice"):
+            raise ValueError(f"vice_update_every is for the vice reward, >= 0 (0: a fixed classifier), got "
+                             f"{self.vice_update_every} with the {self.reward} reward")
         if self.target_kl < 0:
             raise ValueError(f"target_kl must be >= 0 (0: no early stop), got {self.target_kl}")
         if self.start not in ("auto", "above", "around"):

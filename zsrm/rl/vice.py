@@ -12,7 +12,7 @@ import numpy as np
 
 from zsrm.envs.rollout import episode_steps, make_env, random_policy
 from zsrm.envs.scripted import scripted_controller
-from zsrm.rewards.vice import GoalClassifier, VICEReward, fit_goal_classifier
+from zsrm.rewards.vice import GoalClassifier, OnlineVICEReward, VICEReward, fit_goal_classifier
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.goals import goal_camera, task_entry
 
@@ -37,11 +37,22 @@ def goal_frames(cfg: TrainConfig, episodes: int = 20) -> tuple[np.ndarray, np.nd
 
 def vice_reward(cfg: TrainConfig, folder: Path, episodes: int = 20) -> VICEReward:
     """The VICE reward for ``cfg.goal``: the classifier in ``folder`` if there is one, else fitted
-    on fresh goal frames and saved there."""
-    folder = Path(folder)
+    on fresh goal frames and saved there. With ``cfg.vice_update_every`` it keeps learning from the
+    policy's frames (:class:`~zsrm.rewards.vice.OnlineVICEReward`), its latest state kept beside
+    ``folder`` (``vice_online/``), where a resumed run picks it up."""
+    folder, frames = Path(folder), None
     if not (folder / "config.json").is_file():
         frames, labels = goal_frames(cfg, episodes)
         classifier = fit_goal_classifier(frames, labels, image_size=cfg.image_size, seed=cfg.seed)
         classifier.save(folder, meta={"goal": task_entry(cfg.goal).goal, "frames": int(len(frames)),
                                       "goal_frames": int(labels.sum()), "episodes": 2 * episodes})
-    return VICEReward(GoalClassifier.from_folder(folder), goal_camera(cfg.goal))
+    if not cfg.vice_update_every:
+        return VICEReward(GoalClassifier.from_folder(folder), goal_camera(cfg.goal))
+    if frames is None:  # a resumed run: the same frames again (seeded rollouts)
+        frames, labels = goal_frames(cfg, episodes)
+    latest = folder.with_name("vice_online")
+    classifier = GoalClassifier.from_folder(latest if (latest / "config.json").is_file() else folder)
+    meta = {"goal": task_entry(cfg.goal).goal, "update_every_env_steps": cfg.vice_update_every}
+    return OnlineVICEReward(classifier, goal_camera(cfg.goal), frames[labels], frames[~labels],
+                            update_every=max(1, cfg.vice_update_every // cfg.action_repeat), seed=cfg.seed,
+                            on_update=lambda model: model.save(latest, meta=meta))
