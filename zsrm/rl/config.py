@@ -132,9 +132,8 @@ class TrainConfig:
                      "eval_episodes", "checkpoint_every", "threads", "keypoints"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.vice_update_every < 0 or (self.vice_update_every and self.reward != "vice"):
-            raise ValueError(f"vice_update_every is for the vice reward, >= 0 (0: a fixed classifier), got "
-                             f"{self.vice_update_every} with the {self.reward} reward")
+        if self.vice_update_every < 0:
+            raise ValueError(f"vice_update_every must be >= 0 (0: a fixed classifier), got {self.vice_update_every}")
         if self.target_kl < 0:
             raise ValueError(f"target_kl must be >= 0 (0: no early stop), got {self.target_kl}")
         if self.start not in ("auto", "above", "around"):
@@ -164,6 +163,8 @@ class TrainConfig:
             self.reward_model = pinned(self.reward_model)
         else:  # only the zsrm reward reads it: any other run is the same run whatever it says
             self.reward_model = "student"
+        if self.reward != "vice":  # the same for VICE's classifier updates
+            self.vice_update_every = self.ADDED["vice_update_every"]
         if 100 % self.action_repeat:
             raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
 
