@@ -127,9 +127,11 @@ class OnlineVICEReward(VICEReward):
         super().__init__(classifier, camera)
         if update_every < 1 or steps < 1 or memory < 1:
             raise ValueError(f"update_every, steps and memory must be >= 1, got {update_every}, {steps}, {memory}")
-        self.positives, self.negatives = check_images(positives), check_images(negatives)
+        self.positives, negatives = check_images(positives), check_images(negatives)
         self.update_every, self.steps, self.batch_size = int(update_every), int(steps), int(batch_size)
-        self.memory = np.zeros((int(memory), *self.negatives.shape[1:]), np.uint8)
+        # the negatives: the fitted-on ones, then a ring of the policy's latest frames after them
+        self.fixed, self.memory = len(negatives), int(memory)
+        self.negatives = np.concatenate([negatives, np.zeros((self.memory, *negatives.shape[1:]), np.uint8)])
         self.stored = self.seen = 0
         self.updates = 0
         self.rng = np.random.default_rng(seed)
@@ -139,15 +141,14 @@ class OnlineVICEReward(VICEReward):
     def compute(self, observations, goal, infos) -> np.ndarray:
         reward = super().compute(observations, goal, infos)
         frames = self.images(observations)
-        for frame in frames:  # a ring of the policy's latest frames
-            self.memory[self.stored % len(self.memory)] = frame
-            self.stored += 1
+        self.negatives[self.fixed + (self.stored + np.arange(len(frames))) % self.memory] = frames
+        self.stored += len(frames)
         self.seen += len(frames)
         if self.seen >= self.update_every:
             self.seen -= self.update_every
-            policy = self.memory[:min(self.stored, len(self.memory))]
-            train_steps(self.classifier, self.opt, self.positives, np.concatenate([self.negatives, policy]),
-                        self.steps, self.batch_size, self.rng)
+            train_steps(self.classifier, self.opt, self.positives,
+                        self.negatives[:self.fixed + min(self.stored, self.memory)], self.steps, self.batch_size,
+                        self.rng)
             self.updates += 1
             if self.on_update is not None:
                 self.on_update(self.classifier)
