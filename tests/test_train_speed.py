@@ -46,6 +46,14 @@ def test_presets_are_the_configurations_of_their_committed_trials(folder, name):
         assert preset(name, **same).to_dict() == committed, path.name
 
 
+def test_the_commands_offer_every_preset_by_name():
+    import typing
+
+    from zsrm.rl.config import PresetName
+
+    assert set(typing.get_args(PresetName)) == set(PRESETS)
+
+
 def test_a_config_written_before_the_v3_default_reads_as_v2():
     old = preset("v2", goal="stack", reward="oracle")
     written = old.to_dict()

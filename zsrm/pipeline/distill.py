@@ -11,13 +11,12 @@ import os
 import platform
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
 
 from zsrm.common.files import check_writable
 from zsrm.pipeline import narrow
 from zsrm.pipeline.learn import Sweep
 from zsrm.policy.training import DistillConfig
-from zsrm.rl.config import STACKING, goal_relation
+from zsrm.rl.config import STACKING, PresetName, goal_relation
 from zsrm.tasks.catalogue import TRAIN_TASKS
 
 POLICIES_ROOT = "runs/multitask/policies"
@@ -60,7 +59,7 @@ class MultitaskPolicies:
     vlm: str = "scene"  # the VLM whose image trunk the policies read
     choice: bool = False  # the stacking tasks in choice scenes (zsrm train --choice), each from its --init-root policy
     init_root: str = KEPT_POLICIES  # with --choice: the two-block task policies to start from
-    config: Literal["cpu", "paper", "v3", "v2", "v1"] = "cpu"  # TrainConfig preset of the policies (cpu, the default: v3, issue 52's learner, since 2026-12-06; v2: before then; v1: before 2026-12-04)
+    config: PresetName = "cpu"  # TrainConfig preset of the policies (cpu, the default: v3, issue 52's learner, since 2026-12-06; v2: before then; v1: before 2026-12-04)
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
     def run(self) -> int:

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Literal
 
 from zsrm.common.files import check_writable, write_json
-from zsrm.rl.config import PRESETS, REWARDS, TrainConfig
+from zsrm.rl.config import PRESETS, REWARDS, PresetName, TrainConfig
 
 SWEEP_TASKS = ("stack", "place_right", "push_close")
 
@@ -33,7 +33,7 @@ class Train(TrainConfig):
     """Train a policy from pixels with PPO and a reward from the goal sentence."""
 
     out: str | None = None  # run folder (default: runs/rl/<goal>-<reward>-<seed>)
-    config: Literal["cpu", "paper", "v3", "v2", "v1"] = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v3 (issue 52's learner, the default's values since 2026-12-06: less action noise, mean-action evaluation), v2 (before then), v1 (before 2026-12-04)
+    config: PresetName = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v3 (issue 52's learner, the default's values since 2026-12-06: less action noise, mean-action evaluation), v2 (before then), v1 (before 2026-12-04)
     fresh: bool = False  # start over instead of resuming the run folder's checkpoint
     device: str = "cpu"  # where the VLM trunk and PPO run: cpu, cuda, cuda:N or auto (not part of the run's config)
     env_workers: int = 0  # processes that step the scenes (0: 2 with 8+ envs and 2+ cores, else 1; the same numbers either way); give 1 when runs share the cores
@@ -104,7 +104,7 @@ class Sweep:
     gather_only: bool = False  # train nothing: gather the trials finished so far (e.g. while a sweep runs)
     vlm: str = "scene"  # the VLM whose image trunk the policies read (a folder pretrained by zsrm pretrain-vlm)
     init_root: str | None = None  # start each trial from the policy of the trial of its name under here
-    config: Literal["cpu", "paper", "v3", "v2", "v1"] = "cpu"  # TrainConfig preset of every trial (cpu, the default: v3, issue 52's learner, since 2026-12-06; v2: before then; v1: before 2026-12-04)
+    config: PresetName = "cpu"  # TrainConfig preset of every trial (cpu, the default: v3, issue 52's learner, since 2026-12-06; v2: before then; v1: before 2026-12-04)
     scene: str | None = None  # your own scene (module:Class or a registered id) whose objects --tasks name (docs/own-scene.md)
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 

@@ -39,11 +39,11 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 
 from zsrm.common import files
+from zsrm.rl.config import PresetName
 
 SUMMARY, REPORT, FIGURE = "summary.json", "report.md", "localisation.png"
 PRESENCE_FLOOR = 0.95  # eval-vlm's --min-auroc
@@ -85,7 +85,7 @@ class SceneChain:
     ppo_goal: str | None = None  # also train PPO on this goal, with the oracle, zsrm and random rewards
     ppo_seeds: tuple[int, ...] = (0, 1, 2)  # PPO seeds
     ppo_steps: int = 300_000  # env steps per PPO run
-    ppo_config: Literal["cpu", "paper", "v3", "v2", "v1"] = "cpu"  # the PPO runs' TrainConfig preset (zsrm train --config)
+    ppo_config: PresetName = "cpu"  # the PPO runs' TrainConfig preset (zsrm train --config)
     labeler_floor: float = 0.85  # gate: the labeler's F1 on each relation the goals use
     reward_floor: float = 0.85  # gate: each goal's binarised reward F1
     keep_going: bool = False  # run every stage even after a gate fails

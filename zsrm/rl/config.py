@@ -243,6 +243,8 @@ def goal_relation(goal: str, scene: str | None = None) -> str | None:
     return task.relation if task is not None else None
 
 
+# The presets' names, as the commands take them (--config).
+PresetName = Literal["cpu", "paper", "v3", "v2", "v1"]
 # The old defaults stay by name: a committed result's command names the preset it was made with.
 SAMPLED_V2 = {"log_std_init": 0.0, "eval_deterministic": False}
 PRESETS: dict[str, dict] = {
