@@ -55,6 +55,30 @@ def test_online_vice_stops_paying_for_a_frame_the_policy_keeps_reaching_that_onl
     assert reward({"tilted": frames[labels]}, "a goal").mean() >= 0.9  # the true goal still pays
 
 
+def test_online_vice_with_oracle_labels_keeps_paying_for_the_goal_the_policy_reaches():
+    rng = np.random.default_rng(1)
+    frames = rng.integers(0, 60, (40, 32, 32, 3), dtype=np.uint8)
+    labels = np.arange(40) % 2 == 0
+    frames[labels, 10:20, 10:20] = 250
+    reached = frames[labels][:8].copy()
+    reached[:, :4] = 200  # the policy's goal frames: the goal, and a bar the fitted-on ones never show
+    infos = [{"is_success": True}] * len(reached)
+    paid = {}
+    for oracle_labels in (False, True):
+        clf = fit_goal_classifier(frames, labels, image_size=32, steps=80, seed=0)
+        reward = OnlineVICEReward(clf, "tilted", frames[labels], frames[~labels], update_every=16, steps=30,
+                                  memory=64, batch_size=32, seed=0, oracle_labels=oracle_labels)
+        assert reward({"tilted": reached}, "a goal", infos).all()
+        for _ in range(12):
+            reward({"tilted": reached}, "a goal", infos)
+        paid[oracle_labels] = reward({"tilted": reached}, "a goal", infos).mean()
+        assert len(reward.positives) == 20 + 64 * oracle_labels  # the 20 fitted-on goal frames, the latest 64 reached
+    assert paid[False] == 0.0  # all the policy's frames negatives: the goal it reaches stops paying
+    assert paid[True] == 1.0
+    with pytest.raises(ValueError, match="needs the env's infos"):
+        reward({"tilted": reached}, "a goal", None)
+
+
 def test_vice_updates_are_read_by_the_vice_reward_alone_and_unwritten_when_off():
     assert "vice_update_every" not in TrainConfig(goal="stack", reward="vice", vice_update_every=0).to_dict()
     assert TrainConfig(goal="stack", reward="vice", vice_update_every=4000).to_dict()["vice_update_every"] == 4000
@@ -62,6 +86,12 @@ def test_vice_updates_are_read_by_the_vice_reward_alone_and_unwritten_when_off()
     assert TrainConfig(goal="stack", reward="oracle", vice_update_every=4000) == TrainConfig(goal="stack", reward="oracle")
     with pytest.raises(ValueError, match="vice_update_every must be >= 0"):
         TrainConfig(goal="stack", reward="vice", vice_update_every=-1)
+    assert "vice_oracle_labels" not in TrainConfig(goal="stack", reward="vice").to_dict()
+    labelled = TrainConfig(goal="stack", reward="vice", vice_update_every=4000, vice_oracle_labels=True)
+    assert labelled.to_dict()["vice_oracle_labels"] is True
+    assert TrainConfig(goal="stack", reward="oracle", vice_oracle_labels=True) == TrainConfig(goal="stack", reward="oracle")
+    with pytest.raises(ValueError, match="set vice_update_every too"):
+        TrainConfig(goal="stack", reward="vice", vice_oracle_labels=True)
 
 
 def test_icm_learns_what_the_action_did():

@@ -111,29 +111,49 @@ class VICEReward(RewardModel):
         return (self.classifier(self.images(observations)) > 0).float().numpy()
 
 
+class FrameBank:
+    """Fixed frames, then a ring of the latest ``memory`` frames added after them (one array, so
+    that a batch draws from both with one index)."""
+
+    def __init__(self, fixed: np.ndarray, memory: int):
+        self.fixed, self.memory, self.stored = len(fixed), int(memory), 0
+        self.frames = np.concatenate([fixed, np.zeros((self.memory, *fixed.shape[1:]), np.uint8)])
+
+    def add(self, frames: np.ndarray) -> None:
+        self.frames[self.fixed + (self.stored + np.arange(len(frames))) % self.memory] = frames
+        self.stored += len(frames)
+
+    def __len__(self) -> int:
+        return self.fixed + min(self.stored, self.memory)
+
+    def __getitem__(self, index):
+        return self.frames[:len(self)][index]
+
+
 class OnlineVICEReward(VICEReward):
     """VICE as Fu et al. (2018) train it: the classifier keeps learning while the policy trains.
 
     The frames it scores are the policy's. Every ``update_every`` of them it takes ``steps`` Adam
     steps on batches of half true goal frames (``positives``, oracle-labelled) and half negatives:
     the non-goal frames it was fitted on and the policy's latest ``memory`` frames. A frame the
-    policy keeps reaching that only looks like the goal then stops paying. ``on_update(classifier)``
+    policy keeps reaching that only looks like the goal then stops paying. With ``oracle_labels``
+    the policy's frames are labelled by the oracle (``info["is_success"]``) as the fitted-on frames
+    are, VICE-RAQ (Singh et al., 2019) with every frame queried: its goal frames join the positives,
+    so a policy that reaches the goal is not taught that the goal does not pay. ``on_update(classifier)``
     runs after each update (the run keeps the latest classifier, so a resumed run starts from it;
     the policy's frames and the optimiser's moments start afresh)."""
 
     def __init__(self, classifier: GoalClassifier, camera: str, positives: np.ndarray, negatives: np.ndarray,
                  update_every: int, steps: int = 50, memory: int = 2048, batch_size: int = 128, lr: float = 1e-3,
-                 seed: int = 0, on_update=None):
+                 seed: int = 0, oracle_labels: bool = False, on_update=None):
         super().__init__(classifier, camera)
         if update_every < 1 or steps < 1 or memory < 1:
             raise ValueError(f"update_every, steps and memory must be >= 1, got {update_every}, {steps}, {memory}")
-        self.positives, negatives = check_images(positives), check_images(negatives)
+        self.positives = FrameBank(check_images(positives), memory)
+        self.negatives = FrameBank(check_images(negatives), memory)
         self.update_every, self.steps, self.batch_size = int(update_every), int(steps), int(batch_size)
-        # the negatives: the fitted-on ones, then a ring of the policy's latest frames after them
-        self.fixed, self.memory = len(negatives), int(memory)
-        self.negatives = np.concatenate([negatives, np.zeros((self.memory, *negatives.shape[1:]), np.uint8)])
-        self.stored = self.seen = 0
-        self.updates = 0
+        self.oracle_labels = bool(oracle_labels)
+        self.seen = self.updates = 0
         self.rng = np.random.default_rng(seed)
         self.opt = torch.optim.Adam(classifier.parameters(), lr=lr)
         self.on_update = on_update
@@ -141,13 +161,18 @@ class OnlineVICEReward(VICEReward):
     def compute(self, observations, goal, infos) -> np.ndarray:
         reward = super().compute(observations, goal, infos)
         frames = self.images(observations)
-        self.negatives[self.fixed + (self.stored + np.arange(len(frames))) % self.memory] = frames
-        self.stored += len(frames)
+        if self.oracle_labels:
+            if infos is None:
+                raise ValueError("oracle_labels needs the env's infos (their is_success) for the policy's frames")
+            goal_reached = np.array([bool(info["is_success"]) for info in infos])
+            self.positives.add(frames[goal_reached])
+            self.negatives.add(frames[~goal_reached])
+        else:
+            self.negatives.add(frames)
         self.seen += len(frames)
         if self.seen >= self.update_every:
             self.seen -= self.update_every
-            train_steps(self.classifier, self.opt, self.positives,
-                        self.negatives[:self.fixed + min(self.stored, self.memory)], self.steps, self.batch_size,
+            train_steps(self.classifier, self.opt, self.positives, self.negatives, self.steps, self.batch_size,
                         self.rng)
             self.updates += 1
             if self.on_update is not None:

@@ -103,6 +103,10 @@ class TrainConfig:
     """--reward vice: every this many env steps the goal classifier takes 50 Adam steps with the
     policy's latest frames as negatives beside the true goal frames, as Fu et al. (2018) train VICE
     (zsrm.rewards.vice.OnlineVICEReward); 0: fitted once before training, as until 2026-12-06"""
+    vice_oracle_labels: bool = False
+    """--reward vice with --vice-update-every: the policy's frames are labelled by the oracle, as
+    the frames the classifier was fitted on are (VICE-RAQ with every frame queried): those in the
+    goal relation join the positives, the others the negatives; off: all of them negatives"""
     choice: bool = False
     """stacking goals: the scene also holds a third block (the first training colour the goal does not
     name) in line with the goal's, on the far side of the moved block from its base, so the policy
@@ -117,7 +121,8 @@ class TrainConfig:
     # Settings added after runs were committed: written only when changed, so that a finished
     # run made before they existed still matches its configuration.
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0,
-             "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0}
+             "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
+             "vice_oracle_labels": False}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
@@ -165,6 +170,10 @@ class TrainConfig:
             self.reward_model = "student"
         if self.reward != "vice":  # the same for VICE's classifier updates
             self.vice_update_every = self.ADDED["vice_update_every"]
+            self.vice_oracle_labels = self.ADDED["vice_oracle_labels"]
+        if self.vice_oracle_labels and not self.vice_update_every:
+            raise ValueError("vice_oracle_labels labels the policy's frames for the classifier's updates: "
+                             "set vice_update_every too")
         if 100 % self.action_repeat:
             raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
 

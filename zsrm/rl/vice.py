@@ -52,7 +52,8 @@ def vice_reward(cfg: TrainConfig, folder: Path, episodes: int = 20) -> VICERewar
         frames, labels = goal_frames(cfg, episodes)
     latest = folder.with_name("vice_online")
     classifier = GoalClassifier.from_folder(latest if (latest / "config.json").is_file() else folder)
-    meta = {"goal": task_entry(cfg.goal).goal, "update_every_env_steps": cfg.vice_update_every}
+    meta = {"goal": task_entry(cfg.goal).goal, "update_every_env_steps": cfg.vice_update_every,
+            "oracle_labels": cfg.vice_oracle_labels}
     return OnlineVICEReward(classifier, goal_camera(cfg.goal), frames[labels], frames[~labels],
                             update_every=max(1, cfg.vice_update_every // cfg.action_repeat), seed=cfg.seed,
-                            on_update=lambda model: model.save(latest, meta=meta))
+                            oracle_labels=cfg.vice_oracle_labels, on_update=lambda model: model.save(latest, meta=meta))
