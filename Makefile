@@ -84,18 +84,16 @@ results: setup
 	# Training speed: each lever from v1 to the default, part by part; then the whole train loop against v1
 	OMP_NUM_THREADS=1 $(PY) benchmarks/train_profile.py --out results/rl/profile.json
 	OMP_NUM_THREADS=1 $(PY) benchmarks/ppo_speed.py --out results/ppo_speed.json
-	# Learning from pixels (oracle/zsrm/random, 3 tasks x 5 seeds of 300k steps: about 1.7 hours on 2 cores),
-	# the v2 configuration (the default until 2026-12-06) and the shipped student
-	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close --rewards oracle zsrm random --seeds 0 1 2 3 4 \
-		--out results/rl/learning.json --config v2
-	# Figures 4 and 6 (baselines base, vice, curiosity and the pendulum; the learning runs above are part of it)
-	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity random \
-		--seeds 0 1 2 --out results/rl/summary.json --config v2
-	$(VENV)/bin/zsrm plot --summary results/rl/summary.json --figure6 results/rl/figure6.png --figure4 results/rl/figure4.png
 	# The default learner (v3) on the nine relations' tasks, 3 seeds (81 trials, about 6 core-hours)
-	$(VENV)/bin/zsrm sweep --config v3 --tasks stack place_left place_right place_below place_between place_front \
-		place_behind place_inside push_close --rewards zsrm oracle random --seeds 0 1 2 --root runs/rl-v3 \
-		--out results/rl/v3/learning.json
+	$(VENV)/bin/zsrm sweep --root runs/rl-v3 --out results/rl/learning.json
+	# The v2 learner (the default until 2026-12-06; results/rl/v2/): oracle/zsrm/random, 3 tasks x 5 seeds of 300k
+	# steps (about 1.7 hours on 2 cores), then Figures 4 and 6 (base, vice, curiosity and the pendulum)
+	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close --rewards oracle zsrm random --seeds 0 1 2 3 4 \
+		--out results/rl/v2/learning.json --config v2
+	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity random \
+		--seeds 0 1 2 --out results/rl/v2/summary.json --config v2
+	$(VENV)/bin/zsrm plot --summary results/rl/v2/summary.json --figure6 results/rl/v2/figure6.png \
+		--figure4 results/rl/v2/figure4.png
 	# The same before 2026-12-04 (results/rl/v1/): the v1 configuration and the student shipped before the box
 	# (kept under zsrm/fullmodel/weights/retired/); 22-25 core-minutes a trial
 	$(VENV)/bin/zsrm sweep --config v1 --root runs/rl-v1 --tasks push_close place_right stack --rewards oracle zsrm random \

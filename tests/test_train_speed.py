@@ -34,7 +34,7 @@ def test_v1_preset_is_the_configuration_of_the_older_committed_trials():
         assert preset("v1", **same).to_dict() == committed, path.name
 
 
-@pytest.mark.parametrize("folder, name", [("rl/trials", "v2"), ("rl/v3/trials", "cpu"), ("rl/v3/trials", "v3")])
+@pytest.mark.parametrize("folder, name", [("rl/v2/trials", "v2"), ("rl/trials", "cpu"), ("rl/trials", "v3")])
 def test_presets_are_the_configurations_of_their_committed_trials(folder, name):
     """v2 (the default from 2026-12-04 to 2026-12-06) is the v2 sweeps' learner; the default is v3's."""
     trials = sorted((ROOT / "results" / folder).glob("*.json"))

@@ -14,8 +14,7 @@ from typing import Literal
 
 from zsrm.common.files import check_writable, write_json
 from zsrm.rl.config import PRESETS, REWARDS, PresetName, TrainConfig
-
-SWEEP_TASKS = ("stack", "place_right", "push_close")
+from zsrm.tasks.catalogue import LEARNING_TASKS
 
 
 def with_preset(options, name: str) -> TrainConfig:
@@ -92,7 +91,7 @@ def absolute_if_folder(spec: str) -> str:
 class Sweep:
     """Train tasks x rewards x seeds on Ray Tune (resumable), then gather the summary and plot."""
 
-    tasks: tuple[str, ...] = SWEEP_TASKS  # catalogue tasks or goal sentences
+    tasks: tuple[str, ...] = LEARNING_TASKS  # catalogue tasks or goal sentences (default: the nine relations' tasks)
     rewards: tuple[str, ...] = ("oracle", "zsrm", "random")  # rewards, of: oracle, zsrm, base, vice, curiosity, random
     seeds: tuple[int, ...] = (0, 1, 2)  # seeds per task and reward
     root: str = "runs/rl"  # one folder per trial under here (shared storage on a cluster)

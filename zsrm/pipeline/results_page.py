@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from zsrm.common.files import check_writable, write_text
+from zsrm.tasks.catalogue import LEARNING_TASKS
 
 HEADLINE_START = "<!-- headline: written by `zsrm results-page` from results/; do not edit by hand -->"
 HEADLINE_END = "<!-- end of headline -->"
@@ -102,9 +103,8 @@ def _learning(d: dict) -> str:
 
 def _nine(d: dict) -> str:
     """zsrm's final success rate per task, the oracle's and random's beside it."""
-    order = ("stack", "place_left", "place_right", "place_below", "place_between", "place_front", "place_behind",
-             "place_inside", "push_close")
-    rate = {t: tuple(d[t][r]["final_success_rate"] for r in ("zsrm", "oracle", "random")) for t in order if t in d}
+    rate = {t: tuple(d[t][r]["final_success_rate"] for r in ("zsrm", "oracle", "random"))
+            for t in LEARNING_TASKS if t in d}
     return "; ".join(f"{t} {_slash(v)}" for t, v in rate.items()) + " (zsrm / oracle / random)"
 
 
@@ -147,9 +147,6 @@ def _scripted(d: dict) -> str:
     return f"{spread} on each of {len(rates)} tasks"
 
 
-LEARNING = "zsrm sweep --tasks stack place_right push_close --rewards oracle zsrm random --seeds 0 1 2 3 4"
-FIGURE6 = ("zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity "
-           "random --seeds 0 1 2 --out results/rl/summary.json --config v2")
 
 FIGURES = [
     # the paper's figures
@@ -162,11 +159,13 @@ FIGURES = [
            lambda d: _slash(d[f"f1.{r}"] for r in ("left_of", "in_front_of", "in_between", "on_top_of", "close_to",
                                                    "inside_of")),
            "zsrm eval-grounding data/grounding-box --labels labels-refined --out results/grounding.json"),
-    Figure("Figure 4: pendulum oracle return, base / oracle reward", "rl/summary.json",
-           lambda d: f"{_pm(d['pendulum']['base'])} / {_pm(d['pendulum']['oracle'])}", FIGURE6),
+    Figure("Figure 4: pendulum oracle return, base / oracle reward (the v2 learner, the default until 2026-12-06)",
+           "rl/v2/summary.json", lambda d: f"{_pm(d['pendulum']['base'])} / {_pm(d['pendulum']['oracle'])}",
+           _recorded_command),
     Figure("Figure 5: base reward along a scripted push", "figure5.csv", _figure5,
            "zsrm reward-curve --out results/figure5"),
-    Figure("Figure 6: final oracle episode reward", "rl/summary.json", _figure6, FIGURE6),
+    Figure("Figure 6: final oracle episode reward (the v2 learner, the default until 2026-12-06)",
+           "rl/v2/summary.json", _figure6, _recorded_command),
     Figure("Table 2: distilled policies on the blue test tasks (grey frames)", "table2.json", _table2,
            "zsrm eval-multitask --policies runs/multitask/distill runs/multitask/distill-dagger "
            "runs/multitask/distill-mirror-teachers --seeds 50 --out results/table2.json"),
@@ -201,10 +200,10 @@ FIGURES = [
            "LIBERO's BDDL `On` predicate (docs/benchmarks.md)", "benchmarks/libero.json", _benchmark,
            _recorded_command),
     Figure("Learning from pixels, the default learner (v3) on the nine relations' tasks: final success rate "
-           "(the goal holds at an episode's last step), 300k env steps, 3 seeds", "rl/v3/learning.json", _nine,
+           "(the goal holds at an episode's last step), 300k env steps, 3 seeds", "rl/learning.json", _nine,
            _recorded_command),
     Figure("Learning from pixels, the v2 learner (the default until 2026-12-06), final oracle episode reward",
-           "rl/learning.json", _learning, LEARNING + " --out results/rl/learning.json --config v2"),
+           "rl/v2/learning.json", _learning, _recorded_command),
     Figure("Table 2 in colour frames (the paper's setting): the paper's three, behaviour cloning",
            "multitask/table2_colour.json", _colour,
            "zsrm eval-multitask --policies runs/multitask/distill-colour --seeds 50 "
