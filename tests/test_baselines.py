@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from zsrm.rewards.vice import GoalClassifier, OnlineVICEReward, VICEReward, fit_goal_classifier
-from zsrm.rl.config import TrainConfig
+from zsrm.rl.config import TrainConfig, preset
 from zsrm.rl.curiosity import ICM, VecCuriosity
 from zsrm.rl.envs import make_vec
 from zsrm.rl.vice import goal_frames
@@ -80,18 +80,20 @@ def test_online_vice_with_oracle_labels_keeps_paying_for_the_goal_the_policy_rea
 
 
 def test_vice_updates_are_read_by_the_vice_reward_alone_and_unwritten_when_off():
-    assert "vice_update_every" not in TrainConfig(goal="stack", reward="vice", vice_update_every=0).to_dict()
-    assert TrainConfig(goal="stack", reward="vice", vice_update_every=4000).to_dict()["vice_update_every"] == 4000
+    default = TrainConfig(goal="stack", reward="vice").to_dict()
+    assert default["vice_update_every"] == 4000 and default["vice_oracle_labels"] is True  # the default since 2026-12-06
+    fixed = TrainConfig(goal="stack", reward="vice", vice_update_every=0)
+    assert not fixed.vice_oracle_labels  # a classifier fitted once has no policy frames to label
+    assert "vice_update_every" not in fixed.to_dict() and "vice_oracle_labels" not in fixed.to_dict()
+    # a run written before the settings existed had a classifier fitted once, and reads so
+    legacy = TrainConfig.from_dict({"goal": "stack", "reward": "vice"})
+    assert (legacy.vice_update_every, legacy.vice_oracle_labels) == (0, False)
+    assert preset("v2", goal="stack", reward="vice").vice_update_every == 0  # the old default, by name
     # a sweep's shared setting: any other reward's run is the same run whatever it says
-    assert TrainConfig(goal="stack", reward="oracle", vice_update_every=4000) == TrainConfig(goal="stack", reward="oracle")
+    assert TrainConfig(goal="stack", reward="oracle", vice_update_every=20) == TrainConfig(goal="stack", reward="oracle")
+    assert "vice_update_every" not in TrainConfig(goal="stack", reward="oracle").to_dict()
     with pytest.raises(ValueError, match="vice_update_every must be >= 0"):
         TrainConfig(goal="stack", reward="vice", vice_update_every=-1)
-    assert "vice_oracle_labels" not in TrainConfig(goal="stack", reward="vice").to_dict()
-    labelled = TrainConfig(goal="stack", reward="vice", vice_update_every=4000, vice_oracle_labels=True)
-    assert labelled.to_dict()["vice_oracle_labels"] is True
-    assert TrainConfig(goal="stack", reward="oracle", vice_oracle_labels=True) == TrainConfig(goal="stack", reward="oracle")
-    with pytest.raises(ValueError, match="set vice_update_every too"):
-        TrainConfig(goal="stack", reward="vice", vice_oracle_labels=True)
 
 
 def test_icm_learns_what_the_action_did():

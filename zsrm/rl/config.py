@@ -99,14 +99,14 @@ class TrainConfig:
     open fingers around it, so that closing them grasps it (around); auto: around for stacking
     goals (on top of, below), whose oracle reward stayed 0 for 300k steps from above, and for inside
     of (a block lifted into the box; from above 0 in 300k steps with zsrm), else above"""
-    vice_update_every: int = 0
-    """--reward vice: every this many env steps the goal classifier takes 50 Adam steps with the
-    policy's latest frames as negatives beside the true goal frames, as Fu et al. (2018) train VICE
-    (zsrm.rewards.vice.OnlineVICEReward); 0: fitted once before training, as until 2026-12-06"""
-    vice_oracle_labels: bool = False
-    """--reward vice with --vice-update-every: the policy's frames are labelled by the oracle, as
-    the frames the classifier was fitted on are (VICE-RAQ with every frame queried): those in the
-    goal relation join the positives, the others the negatives; off: all of them negatives"""
+    vice_update_every: int = 4000
+    """--reward vice: every this many env steps the goal classifier takes 50 Adam steps on the
+    policy's latest frames beside the frames it was fitted on, as Fu et al. (2018) train VICE
+    (zsrm.rewards.vice.OnlineVICEReward); 0: fitted once before training (the default until 2026-12-06)"""
+    vice_oracle_labels: bool = True
+    """--reward vice: the policy's frames are labelled by the oracle, as the frames the classifier was
+    fitted on are (VICE-RAQ with every frame queried): those in the goal relation join the positives,
+    the others the negatives; --no-vice-oracle-labels: all of them negatives, as VICE's (Fu et al.)"""
     choice: bool = False
     """stacking goals: the scene also holds a third block (the first training colour the goal does not
     name) in line with the goal's, on the far side of the moved block from its base, so the policy
@@ -126,7 +126,7 @@ class TrainConfig:
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
-                       "eval_deterministic": False}
+                       "eval_deterministic": False, "vice_update_every": 0, "vice_oracle_labels": False}
 
     def __post_init__(self):
         if self.reward not in REWARDS:
@@ -171,9 +171,8 @@ class TrainConfig:
         if self.reward != "vice":  # the same for VICE's classifier updates
             self.vice_update_every = self.ADDED["vice_update_every"]
             self.vice_oracle_labels = self.ADDED["vice_oracle_labels"]
-        if self.vice_oracle_labels and not self.vice_update_every:
-            raise ValueError("vice_oracle_labels labels the policy's frames for the classifier's updates: "
-                             "set vice_update_every too")
+        if not self.vice_update_every:  # a classifier fitted once learns nothing from the policy's frames
+            self.vice_oracle_labels = self.ADDED["vice_oracle_labels"]
         if 100 % self.action_repeat:
             raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
 
@@ -256,18 +255,19 @@ def goal_relation(goal: str, scene: str | None = None) -> str | None:
 PresetName = Literal["cpu", "paper", "v3", "v2", "v1"]
 # The old defaults stay by name: a committed result's command names the preset it was made with.
 SAMPLED_V2 = {"log_std_init": 0.0, "eval_deterministic": False}
+FIXED_VICE = {"vice_update_every": 0, "vice_oracle_labels": False}  # VICE's classifier fitted once
 PRESETS: dict[str, dict] = {
     "cpu": {},  # the default (v3 since 2026-12-06)
     "paper": {"steps": 200_000, "n_envs": 16, "n_steps": 256, "batch_size": 512},
     # issue 52's learner (docs/training.md), the default since 2026-12-06: the policy's actions start
     # with a standard deviation of 0.37 instead of 1, and it is evaluated by its mean action
-    "v3": {"log_std_init": -1.0, "eval_deterministic": True},
+    "v3": {"log_std_init": -1.0, "eval_deterministic": True},  # and VICE updated on oracle-labelled frames
     # the default from 2026-12-04 to 2026-12-06 (action noise 1, sampled evaluation)
-    "v2": dict(SAMPLED_V2),
+    "v2": {**SAMPLED_V2, **FIXED_VICE},
     # the default until 2026-12-04, behind the results committed before then (64 px policy views,
     # action repeat 2, 10 epochs): about a fifth of the default's speed (results/ppo_speed.json)
     "v1": {"trunk_size": 0, "pixel_size": 0, "action_repeat": 2, "n_epochs": 10, "batch_size": 128, "n_envs": 8,
-           "n_steps": 128, "gamma": 0.98, "gae_lambda": 0.95, "anneal_lr": False, **SAMPLED_V2},
+           "n_steps": 128, "gamma": 0.98, "gae_lambda": 0.95, "anneal_lr": False, **SAMPLED_V2, **FIXED_VICE},
 }
 
 
