@@ -2,7 +2,8 @@
 
 Scripted controllers (true state) reach the goal; every frame is labelled by the oracle, so
 the goal frames are the positives and all the others (approach, random play) the negatives.
-The classifier (:mod:`zsrm.rewards.vice`) is fitted once per run and kept in the run folder.
+The classifier (:mod:`zsrm.rewards.vice`) is fitted once per run and kept in the run folder;
+by default it keeps learning from the policy's frames, labelled by the oracle too.
 """
 from __future__ import annotations
 
@@ -41,17 +42,20 @@ def vice_reward(cfg: TrainConfig, folder: Path, episodes: int = 20) -> VICERewar
     policy's frames (:class:`~zsrm.rewards.vice.OnlineVICEReward`), its latest state kept beside
     ``folder`` (``vice_online/``), where a resumed run picks it up."""
     folder, frames = Path(folder), None
-    if not (folder / "config.json").is_file():
+    if (folder / "config.json").is_file():
+        classifier = GoalClassifier.from_folder(folder)
+    else:
         frames, labels = goal_frames(cfg, episodes)
         classifier = fit_goal_classifier(frames, labels, image_size=cfg.image_size, seed=cfg.seed)
         classifier.save(folder, meta={"goal": task_entry(cfg.goal).goal, "frames": int(len(frames)),
                                       "goal_frames": int(labels.sum()), "episodes": 2 * episodes})
     if not cfg.vice_update_every:
-        return VICEReward(GoalClassifier.from_folder(folder), goal_camera(cfg.goal))
+        return VICEReward(classifier, goal_camera(cfg.goal))
     if frames is None:  # a resumed run: the same frames again (seeded rollouts)
         frames, labels = goal_frames(cfg, episodes)
     latest = folder.with_name("vice_online")
-    classifier = GoalClassifier.from_folder(latest if (latest / "config.json").is_file() else folder)
+    if (latest / "config.json").is_file():
+        classifier = GoalClassifier.from_folder(latest)
     meta = {"goal": task_entry(cfg.goal).goal, "update_every_env_steps": cfg.vice_update_every,
             "oracle_labels": cfg.vice_oracle_labels}
     return OnlineVICEReward(classifier, goal_camera(cfg.goal), frames[labels], frames[~labels],
