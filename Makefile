@@ -86,6 +86,10 @@ results: setup
 	OMP_NUM_THREADS=1 $(PY) benchmarks/ppo_speed.py --out results/ppo_speed.json
 	# The default learner (v3) on the nine relations' tasks, 3 seeds (81 trials, about 6 core-hours)
 	$(VENV)/bin/zsrm sweep --root runs/rl-v3 --out results/rl/learning.json
+	# Figures 4 and 6 with it (base, vice, curiosity and the pendulum; shares the learning trials above)
+	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity random \
+		--seeds 0 1 2 --root runs/rl-v3 --out results/rl/summary.json
+	$(VENV)/bin/zsrm plot --summary results/rl/summary.json --figure6 results/rl/figure6.png --figure4 results/rl/figure4.png
 	# The v2 learner (the default until 2026-12-06; results/rl/v2/): oracle/zsrm/random, 3 tasks x 5 seeds of 300k
 	# steps (about 1.7 hours on 2 cores), then Figures 4 and 6 (base, vice, curiosity and the pendulum)
 	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close --rewards oracle zsrm random --seeds 0 1 2 3 4 \
