@@ -82,11 +82,13 @@ def kill_after_first_checkpoint(cfg: dict, folder, env_workers: int = 1) -> int:
     return json.loads(state.read_text())["env_steps"]
 
 
-@pytest.mark.parametrize("reward", ["oracle", "curiosity"])
-def test_killed_run_resumes_to_the_same_run(tmp_path, reward):
+@pytest.mark.parametrize("reward, extra", [("oracle", {}), ("curiosity", {}), ("oracle", {"augment_shift": 2})])
+def test_killed_run_resumes_to_the_same_run(tmp_path, reward, extra):
     """Killed (SIGKILL) after its first checkpoint and resumed: the same eval.csv rows, final
-    evaluation and policy weights as an unbroken run (issue 41, must-show 0)."""
-    cfg = dict(goal="place_right", reward=reward, seed=3, steps=768, eval_every=128, checkpoint_every=256, **TINY)
+    evaluation and policy weights as an unbroken run (issue 41, must-show 0); with the shift
+    regulariser too (its generators and optimiser resume)."""
+    cfg = dict(goal="place_right", reward=reward, seed=3, steps=768, eval_every=128, checkpoint_every=256, **TINY,
+               **extra)
     whole = train(TrainConfig(**cfg), tmp_path / "whole", progress=False)
 
     cut = tmp_path / "cut"

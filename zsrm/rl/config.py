@@ -54,6 +54,9 @@ class TrainConfig:
     """also a small CNN on the raw frame, trained by RL (sees the gripper, which the VLM hardly does)"""
     aux_inverse: bool = True
     """train the keypoints with a self-supervised inverse-dynamics loss too (they learn where the agent is)"""
+    augment_shift: int = 0
+    """after each rollout, pull the policy and value on the pixel view shifted by up to this many
+    pixels towards theirs on the view itself (DrAC's regulariser, zsrm.rl.augment); 0: off"""
     n_steps: int = 32
     """PPO rollout length per env"""
     batch_size: int = 32
@@ -122,7 +125,7 @@ class TrainConfig:
     # run made before they existed still matches its configuration.
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0,
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
-             "vice_oracle_labels": False}
+             "vice_oracle_labels": False, "augment_shift": 0}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
@@ -137,6 +140,9 @@ class TrainConfig:
                      "eval_episodes", "checkpoint_every", "threads", "keypoints"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.augment_shift < 0 or (self.augment_shift and not self.pixels):
+            raise ValueError(f"augment_shift shifts the pixel view: >= 0, and 0 without pixels; got "
+                             f"{self.augment_shift} with pixels={self.pixels}")
         if self.vice_update_every < 0:
             raise ValueError(f"vice_update_every must be >= 0 (0: a fixed classifier), got {self.vice_update_every}")
         if self.target_kl < 0:

@@ -27,6 +27,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from zsrm.common.files import atomic_path, read_json, write_json
 from zsrm.rewards import VecZeroShotReward
+from zsrm.rl.augment import ShiftRegulariser
 from zsrm.rl.auxiliary import InverseDynamicsAux
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.curiosity import ICMUpdate, VecCuriosity
@@ -176,11 +177,10 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     venv, extra_callbacks, extra_modules = rewarded_env(cfg, out, done_steps, int(env_workers))
     venv = policy_view(venv, vlm, cfg)
     model = build_ppo(cfg, venv, device)
-    aux = None
-    if cfg.aux_inverse:
-        points_dim = model.policy.features_extractor.out[0].in_features
-        aux = InverseDynamicsAux(points_dim, venv.action_space.shape[0], seed=cfg.seed, device=device)
-        extra_callbacks, extra_modules = [*extra_callbacks, aux], {**extra_modules, "inverse.safetensors": aux.model_inverse}
+    auxiliary = auxiliary_losses(cfg, model, device)
+    extra_callbacks = [*extra_callbacks, *auxiliary.values()]
+    if "inverse" in auxiliary:
+        extra_modules = {**extra_modules, "inverse.safetensors": auxiliary["inverse"].model_inverse}
     if state is not None:
         state["restore"](model, extra_modules)
     elif cfg.init:
@@ -194,7 +194,7 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     with tqdm(total=cfg.steps, initial=done_steps, unit="step", desc=f"train {cfg.reward} {cfg.goal}",
               disable=not progress, smoothing=0.05) as bar:
         callback = EvalAndCheckpoint(cfg, out, evaluator, rows, bar, on_eval, extra_modules)
-        callback.run_state = RunState(model, {"train": callback, **({"inverse": aux} if aux is not None else {})})
+        callback.run_state = RunState(model, {"train": callback, **auxiliary})
         if state is not None and state["resume"] is not None:
             callback.run_state.restore(state["resume"])  # last before learn: it sets the random generators
         if remaining:
@@ -207,6 +207,18 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     PolicyBundle(model.policy, cfg).save(out / "policy")
     return write_summary(cfg, out, by_actions["mean" if cfg.eval_deterministic else "sampled"], rows,
                          callback.env_steps(), wall_s=time.time() - callback.t0, by_actions=by_actions)
+
+
+def auxiliary_losses(cfg: TrainConfig, model: PPO, device: str) -> dict:
+    """The callbacks that train the policy between rollouts beside PPO's loss, by resume name:
+    the inverse-dynamics loss (``aux_inverse``) and the shift regulariser (``augment_shift``)."""
+    losses = {}
+    if cfg.aux_inverse:
+        points_dim = model.policy.features_extractor.out[0].in_features
+        losses["inverse"] = InverseDynamicsAux(points_dim, model.action_space.shape[0], seed=cfg.seed, device=device)
+    if cfg.augment_shift:
+        losses["shift"] = ShiftRegulariser(cfg.augment_shift, lr=cfg.learning_rate, seed=cfg.seed)
+    return losses
 
 
 def final_evaluations(evaluator: Evaluator, model: PPO) -> dict:
