@@ -95,6 +95,13 @@ def _figure6(d: dict) -> str:
                      for t in tasks) + " (zsrm / oracle / base)"
 
 
+def _figure6_vice(d: dict) -> str:
+    """zsrm, the oracle and VICE per task, with how many of the sweep's trials have finished."""
+    tasks, rewards = ("stack", "place_right", "push_close"), ("zsrm", "oracle", "vice")
+    return ("; ".join(f"{t} {_slash((d[t][r]['final_mean'] for r in rewards), '{:.1f}')}" for t in tasks)
+            + f" (zsrm / oracle / vice; {d['meta']['trials_finished']} of {d['meta']['trials_planned']} trials)")
+
+
 def _learning(d: dict) -> str:
     tasks = ("stack", "place_right", "push_close")
     return "; ".join(f"{t} {_slash((d[t][r]['final_mean'] for r in ('zsrm', 'oracle', 'random')), '{:.1f}')}"
@@ -166,6 +173,8 @@ FIGURES = [
            "zsrm reward-curve --out results/figure5"),
     Figure("Figure 6: final oracle episode reward (the v2 learner, the default until 2026-12-06)",
            "rl/v2/summary.json", _figure6, _recorded_command),
+    Figure("Figure 6 with the default learner (v3) and VICE updated on oracle-labelled frames: final oracle "
+           "episode reward, 300k env steps, 3 seeds", "rl/summary.json", _figure6_vice, _recorded_command),
     Figure("Table 2: distilled policies on the blue test tasks (grey frames)", "table2.json", _table2,
            "zsrm eval-multitask --policies runs/multitask/distill runs/multitask/distill-dagger "
            "runs/multitask/distill-mirror-teachers --seeds 50 --out results/table2.json"),
