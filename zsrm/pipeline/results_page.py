@@ -320,6 +320,8 @@ SIDE = [
      "views: the VLM results/own_scene.json was made with"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
      "example scene (probes/own_scene_starts.py): why its goals train in compact scenes with 1 cm steps"),
+    ("side/rl/push_close_sides.json", "a push_close oracle policy (v3, seed 1) succeeds as often whichever side its "
+     "puck starts on (17 of 52 and 14 of 48 episodes): not one fixed push (probes/push_sides.py)"),
     ("side/rl/reward_eval_student_hold_free.json", "a student shown blocks held anywhere in reach (4000 images, "
      "--p-hold-free 0.5): in between 0.93, inside of lost; not shipped (docs/training.md, issue 52)"),
 ]
