@@ -89,23 +89,24 @@ def _benchmark(d: dict) -> str:
                      f"{r['positives']} of {r['frames']} frames hold)" for g, r in d["reward"].items())
 
 
+def _final_means(d: dict, rewards: tuple[str, ...], note: str = "") -> str:
+    """Each Figure 6 task's final oracle episode reward under ``rewards``, in that order."""
+    return ("; ".join(f"{t} {_slash((d[t][r]['final_mean'] for r in rewards), '{:.1f}')}"
+                      for t in ("stack", "place_right", "push_close")) + f" ({' / '.join(rewards)}{note})")
+
+
 def _figure6(d: dict) -> str:
-    tasks = ("stack", "place_right", "push_close")
-    return "; ".join(f"{t} {_slash((d[t][r]['final_mean'] for r in ('zsrm', 'oracle', 'base')), '{:.1f}')}"
-                     for t in tasks) + " (zsrm / oracle / base)"
+    return _final_means(d, ("zsrm", "oracle", "base"))
 
 
 def _figure6_vice(d: dict) -> str:
     """zsrm, the oracle and VICE per task, with how many of the sweep's trials have finished."""
-    tasks, rewards = ("stack", "place_right", "push_close"), ("zsrm", "oracle", "vice")
-    return ("; ".join(f"{t} {_slash((d[t][r]['final_mean'] for r in rewards), '{:.1f}')}" for t in tasks)
-            + f" (zsrm / oracle / vice; {d['meta']['trials_finished']} of {d['meta']['trials_planned']} trials)")
+    meta = d["meta"]
+    return _final_means(d, ("zsrm", "oracle", "vice"), f"; {meta['trials_finished']} of {meta['trials_planned']} trials")
 
 
 def _learning(d: dict) -> str:
-    tasks = ("stack", "place_right", "push_close")
-    return "; ".join(f"{t} {_slash((d[t][r]['final_mean'] for r in ('zsrm', 'oracle', 'random')), '{:.1f}')}"
-                     for t in tasks) + " (zsrm / oracle / random)"
+    return _final_means(d, ("zsrm", "oracle", "random"))
 
 
 def _nine(d: dict) -> str:
