@@ -55,6 +55,40 @@ def test_start_around_puts_open_fingers_around_the_block_one_close_grasps(seed):
         TabletopEnv("stack", image_size=16, start="inside")
 
 
+def test_lift_ceiling_keeps_the_gripper_and_its_block_low():
+    env = TabletopEnv("place_between", image_size=16, lift_ceiling=0.18)
+    env.reset(seed=0)
+    assert env.gripper_position[2] <= TABLE_TOP + 0.18 + 1e-3  # the start is under it too
+    _grasp_yellow(env)
+    for _ in range(20):
+        env.step(np.array([0, 1.0, 1.0]))
+    assert env.held == "yellow"
+    assert env.gripper_position[2] == pytest.approx(TABLE_TOP + 0.18, abs=2e-3)
+    free = TabletopEnv("place_between", image_size=16)
+    free.reset(seed=0)
+    for _ in range(20):
+        free.step(np.array([0, 1.0, -1.0]))
+    assert free.gripper_position[2] > TABLE_TOP + 0.3  # without it, the workspace's top
+    with pytest.raises(ValueError, match="lift_ceiling"):
+        TabletopEnv("place_between", image_size=16, lift_ceiling=0.5)
+
+
+def test_lift_ceiling_reaches_the_tabletop_envs_and_is_written_only_when_set():
+    from zsrm.rl.config import TrainConfig
+    from zsrm.rl.envs import make_vec
+
+    assert "lift_ceiling" not in TrainConfig(goal="place_between").to_dict()
+    cfg = TrainConfig(goal="place_between", lift_ceiling=0.18)
+    assert cfg.to_dict()["lift_ceiling"] == 0.18
+    venv = make_vec(cfg, 1, seed=0)
+    assert venv.envs[0].unwrapped.z_max == pytest.approx(TABLE_TOP + 0.18)
+    venv.close()
+    with pytest.raises(ValueError, match="tabletop"):
+        make_vec(TrainConfig(goal="push_close", lift_ceiling=0.18), 1, seed=0)
+    with pytest.raises(ValueError, match="lift_ceiling"):
+        TrainConfig(goal="place_between", lift_ceiling=-0.1)
+
+
 def test_start_is_written_only_when_changed():
     """Runs committed before the start setting existed keep matching their configuration."""
     from zsrm.rl.config import TrainConfig

@@ -41,7 +41,9 @@ class TabletopEnv(MujocoPixelEnv):
     in front of / behind / close to / inside of). ``grip`` above 0.3 closes the fingers and only
     ``grip`` below -0.7 opens them again (hysteresis, so a noisy command keeps its grasp); a block
     held between closing fingers is welded to the gripper until they open (a grasp that does not
-    slip).
+    slip). ``lift_ceiling`` (metres above the table) lowers the top of the gripper's workspace in
+    task scenes, for goals read on the table where a high lift only leaves the frames a reward
+    model was trained on.
 
     >>> import gymnasium as gym, zsrm.envs
     >>> env = gym.make("zsrm/Tabletop-v0", task="a yellow block on top of a red block")
@@ -59,12 +61,17 @@ class TabletopEnv(MujocoPixelEnv):
 
     def __init__(self, task="stack", cameras=("front",), image_size=64, spread="seen",
                  action_mode: str | None = None, render_mode=None, objects=None, action_repeat: int = 1,
-                 start: str = "above", distractor_place: str = "back"):
+                 start: str = "above", distractor_place: str = "back", lift_ceiling: float | None = None):
         if start not in ("above", "around"):
             raise ValueError(f"unknown start {start!r}; choose 'above' or 'around'")
         if distractor_place not in DISTRACTOR_PLACES:
             raise ValueError(f"unknown distractor_place {distractor_place!r}; choose one of {', '.join(DISTRACTOR_PLACES)}")
+        if lift_ceiling is not None and not Z_RANGE[0] - TABLE_TOP <= lift_ceiling <= Z_RANGE[1] - TABLE_TOP:
+            raise ValueError(f"lift_ceiling {lift_ceiling} m: the gripper's highest point above the table must lie "
+                             f"in [{Z_RANGE[0] - TABLE_TOP:.3f}, {Z_RANGE[1] - TABLE_TOP:.3f}]")
         self.start, self.distractor_place = start, distractor_place
+        # The workspace's top, or lower: a task whose relation lies on the table needs no high lift.
+        self.z_max = Z_RANGE[1] if lift_ceiling is None else TABLE_TOP + float(lift_ceiling)
         super().__init__(task, cameras, image_size, spread, render_mode, objects, action_repeat)
         if distractor_place == "line":
             if self.task is None or self.task.relation not in ("on_top_of", "below") or len(self.distractors) != 1:
@@ -222,7 +229,7 @@ class TabletopEnv(MujocoPixelEnv):
                 pos[0] = block[0] + rng.uniform(-0.01, 0.01)
                 pos[1] = block[1] if self.action_mode == "full" else pos[1]
                 pos[2] = block[2] + GRASP_HEIGHT
-            pos = np.clip(pos, [X_RANGE[0], Y_RANGE[0], Z_RANGE[0]], [X_RANGE[1], Y_RANGE[1], Z_RANGE[1]])
+            pos = np.clip(pos, [X_RANGE[0], Y_RANGE[0], Z_RANGE[0]], [X_RANGE[1], Y_RANGE[1], self.z_max])
         self.data.mocap_pos[self._mocap] = pos
         self.data.qpos[self._gripper_qadr:self._gripper_qadr + 3] = pos
         self.data.qpos[self._gripper_qadr + 3:self._gripper_qadr + 7] = (1, 0, 0, 0)
@@ -258,7 +265,7 @@ class TabletopEnv(MujocoPixelEnv):
         else:
             delta = action[:3].copy()
         target = self.data.mocap_pos[self._mocap] + MAX_MOVE * delta
-        target = np.clip(target, [X_RANGE[0], Y_RANGE[0], Z_RANGE[0]], [X_RANGE[1], Y_RANGE[1], Z_RANGE[1]])
+        target = np.clip(target, [X_RANGE[0], Y_RANGE[0], Z_RANGE[0]], [X_RANGE[1], Y_RANGE[1], self.z_max])
         if self.action_mode == "planar":
             target[1] = 0.0
         self.data.mocap_pos[self._mocap] = target

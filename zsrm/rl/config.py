@@ -102,6 +102,9 @@ class TrainConfig:
     open fingers around it, so that closing them grasps it (around); auto: around for stacking
     goals (on top of, below), whose oracle reward stayed 0 for 300k steps from above, and for inside
     of (a block lifted into the box; from above 0 in 300k steps with zsrm), else above"""
+    lift_ceiling: float = 0.0
+    """tabletop tasks: the gripper's origin stays at most this many metres above the table (the held
+    block's centre 0.056 below it; the workspace's top is 0.33); 0: no ceiling below the workspace's"""
     vice_update_every: int = 4000
     """--reward vice: every this many env steps the goal classifier takes 50 Adam steps on the
     policy's latest frames beside the frames it was fitted on, as Fu et al. (2018) train VICE
@@ -125,7 +128,7 @@ class TrainConfig:
     # run made before they existed still matches its configuration.
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0,
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
-             "vice_oracle_labels": False, "augment_shift": 0}
+             "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
@@ -143,6 +146,8 @@ class TrainConfig:
         if self.augment_shift < 0 or (self.augment_shift and not self.pixels):
             raise ValueError(f"augment_shift shifts the pixel view: >= 0, and 0 without pixels; got "
                              f"{self.augment_shift} with pixels={self.pixels}")
+        if self.lift_ceiling < 0:
+            raise ValueError(f"lift_ceiling must be >= 0 (0: the workspace's top), got {self.lift_ceiling}")
         if self.vice_update_every < 0:
             raise ValueError(f"vice_update_every must be >= 0 (0: a fixed classifier), got {self.vice_update_every}")
         if self.target_kl < 0:

@@ -47,6 +47,10 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
         if entry.env_id != TABLETOP_ID:
             raise ValueError(f"start {cfg.start!r} is for the tabletop's blocks; {cfg.goal!r} is not a tabletop task")
         kwargs["start"] = cfg.start
+    if cfg.lift_ceiling:
+        if entry.env_id != TABLETOP_ID:
+            raise ValueError(f"lift_ceiling is for the tabletop's gripper; {cfg.goal!r} is not a tabletop task")
+        kwargs["lift_ceiling"] = cfg.lift_ceiling
     decisions = EPISODE_STEPS // cfg.action_repeat
     return vec_of([lambda: gym.make(entry.env_id, max_episode_steps=decisions, **kwargs)] * n_envs, seed, workers)
 
