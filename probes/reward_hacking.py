@@ -5,7 +5,8 @@ decision with both the zsrm reward (the policy's own training reward) and the or
 frames where they disagree it reports the goal objects' offset in the camera plane the
 relation is read on (metres: x right, y up for the front camera), beside Table 1's thresholds,
 so a reward the policy exploits shows as a geometry the oracle rejects (a block held too high
-to be "on top of", say).
+to be "on top of", say), and the first object's height above the table (a block held in the air
+beside the others, where a student read "in between").
 
     python probes/reward_hacking.py runs/rl/stack-zsrm-0/policy --episodes 20 \
         --out results/rl/reward_hacking_stack.json
@@ -18,6 +19,7 @@ from dataclasses import asdict, replace
 import numpy as np
 
 from zsrm.common.files import write_json
+from zsrm.envs.base import TABLE_TOP
 from zsrm.rewards import VecZeroShotReward
 from zsrm.rl.envs import make_reward, make_vec
 from zsrm.rl.evaluate import eval_seed
@@ -30,7 +32,7 @@ from zsrm.vlm import load_vlm
 
 def score_rollouts(policy: str, episodes: int, reward_model: str | None = None) -> dict[str, np.ndarray]:
     """Per decision: the zsrm reward (of ``reward_model``, default the one the policy trained
-    with), the oracle's verdict and the goal objects' plane offset."""
+    with), the oracle's verdict, the goal objects' plane offset and the first one's height."""
     bundle = PolicyBundle.load(policy)
     cfg = bundle.cfg
     entry = task_entry(cfg.goal)
@@ -44,12 +46,13 @@ def score_rollouts(policy: str, episodes: int, reward_model: str | None = None) 
         obs, rewards, dones, infos = venv.step(bundle.act(obs, deterministic=cfg.eval_deterministic))
         for i, info in enumerate(infos):
             if running[i]:
-                a, b = (camera_plane(info["object_positions"][c], camera) for c in task.objects[:2])
-                rows.append((rewards[i], info["is_success"], *(a - b)))
+                positions = info["object_positions"]
+                a, b = (camera_plane(positions[c], camera) for c in task.objects[:2])
+                rows.append((rewards[i], info["is_success"], *(a - b), positions[task.objects[0]][2] - TABLE_TOP))
                 running[i] = not dones[i]
     venv.close()
-    zsrm, oracle, dx, dy = np.array(rows, dtype=np.float64).T
-    return {"zsrm": zsrm > 0.5, "oracle": oracle > 0.5, "dx": dx, "dy": dy}
+    zsrm, oracle, dx, dy, height = np.array(rows, dtype=np.float64).T
+    return {"zsrm": zsrm > 0.5, "oracle": oracle > 0.5, "dx": dx, "dy": dy, "height": height}
 
 
 def summarise(frames: dict[str, np.ndarray]) -> dict:
@@ -58,7 +61,8 @@ def summarise(frames: dict[str, np.ndarray]) -> dict:
             return {"frames": 0}
         return {"frames": int(mask.sum()), "median_abs_dx_m": float(np.median(np.abs(frames["dx"][mask]))),
                 "median_dy_m": float(np.median(frames["dy"][mask])),
-                "p90_dy_m": float(np.percentile(frames["dy"][mask], 90))}
+                "p90_dy_m": float(np.percentile(frames["dy"][mask], 90)),
+                "median_height_m": float(np.median(frames["height"][mask]))}
 
     z, o = frames["zsrm"], frames["oracle"]
     return {"decisions": int(z.size), "zsrm_rate": float(z.mean()), "oracle_rate": float(o.mean()),
@@ -78,6 +82,8 @@ def main() -> None:
                        "reward_model": args.reward_model or "the policy's own",
                        "offset": "first goal object minus second, in the plane of the camera the relation is "
                                  "read on (metres)",
+                       "height": "the first goal object's centre above the table (metres; a block resting "
+                                 "on it: 0.03)",
                        "command": f"python probes/reward_hacking.py {args.policy} --episodes {args.episodes} "
                                   + (f"--reward-model {args.reward_model} " if args.reward_model else "")
                                   + f"--out {args.out}"}

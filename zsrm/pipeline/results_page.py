@@ -327,6 +327,11 @@ SIDE = [
      "puck starts on (17 of 52 and 14 of 48 episodes): not one fixed push (probes/push_sides.py)"),
     ("side/rl/reward_eval_student_hold_free.json", "a student shown blocks held anywhere in reach (4000 images, "
      "--p-hold-free 0.5): in between 0.93, inside of lost; not shipped (docs/training.md, issue 52)"),
+    ("side/rl/reward_hacking_place_between_500k.json", "a place_between zsrm policy (500k, seed 1) holds the yellow "
+     "block 0.27 m above the table wherever the others are: the student pays in 0.95 of decisions, the oracle "
+     "in 0.44 (probes/reward_hacking.py)"),
+    ("side/rl/reward_hacking_place_between_ceiling0.18.json", "the same with --lift-ceiling 0.18 (300k, seed 0): "
+     "held 0.12 m up, the student pays in 0.78, the oracle in 0.53"),
 ]
 
 # Files beside the figures: plots and tables of them, the models and runs they come from.
