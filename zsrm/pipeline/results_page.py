@@ -332,6 +332,9 @@ SIDE = [
      "in 0.44 (probes/reward_hacking.py)"),
     ("side/rl/reward_hacking_place_between_ceiling0.18.json", "the same with --lift-ceiling 0.18 (300k, seed 0): "
      "held 0.12 m up, the student pays in 0.78, the oracle in 0.53"),
+    ("side/rl/push_close_ends.json", "a push_close oracle policy (500k, seed 0) by start side, and its 20 of 30 "
+     "episodes that never succeed: the pucks end 14.5 cm apart (close to: under 10), the nearest 14.3: the push "
+     "stops short (probes/push_sides.py)"),
 ]
 
 # Files beside the figures: plots and tables of them, the models and runs they come from.
