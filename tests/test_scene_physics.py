@@ -237,3 +237,28 @@ def test_a_scene_mirrored_left_to_right_renders_as_the_front_frame_flipped(task)
     # A few edge pixels of the gripper's rod differ (under 1%); the unflipped frame differs at ~8%.
     assert differs(mirrored, frame[:, ::-1]) < 0.01 < 0.05 < differs(mirrored, frame)
     env.close()
+
+
+def test_near_start_draws_nearer_pucks_for_training_envs_only():
+    from zsrm.rl.config import TrainConfig
+    from zsrm.rl.envs import make_vec
+
+    def gaps(env, seeds=range(30)):
+        out = []
+        for seed in seeds:
+            env.reset(seed=seed)
+            mover, anchor = (env.object_positions()[c] for c in env.task.objects[:2])
+            out.append(abs(mover[0] - anchor[0]))
+        return np.array(out)
+
+    w = 2 * pushing.PUCK_HALF
+    near, far = gaps(PushingEnv(task="push_close", image_size=16, near_start=0.8)), gaps(PushingEnv(image_size=16))
+    assert near.mean() < far.mean() - 0.5 * w  # the gap is drawn in [0.8, 1.7] widths, not fixed at 1.7
+    assert "near_start" not in TrainConfig(goal="push_close").to_dict()
+    cfg = TrainConfig(goal="push_close", near_start=0.8)
+    assert make_vec(cfg, 1, 0, training=True).envs[0].unwrapped.near_start == 0.8
+    assert make_vec(cfg, 1, 0).envs[0].unwrapped.near_start is None  # evaluation starts as the scene does
+    with pytest.raises(ValueError, match="near_start"):
+        TrainConfig(goal="push_close", near_start=2.0)
+    with pytest.raises(ValueError, match="pushing"):
+        make_vec(TrainConfig(goal="stack", near_start=0.8), 1, 0, training=True)

@@ -26,7 +26,9 @@ PUCK_X_MAX = X_RANGE[1] - 2 * PUCK_HALF
 class PushingEnv(MujocoPixelEnv):
     """Two pucks and a pusher driven in the table plane by a mocap body.
 
-    Actions in [-1, 1]: ``(dx, dy)``. Observations: images only.
+    Actions in [-1, 1]: ``(dx, dy)``. Observations: images only. ``near_start`` (training
+    curricula): the pucks of close to and the like start a gap drawn per episode between it and
+    ``GAP_START`` puck widths from the centre line, instead of ``GAP_START``.
 
     >>> import gymnasium as gym, zsrm.envs
     >>> env = gym.make("zsrm/Pushing-v0")  # "a blue puck close to a yellow puck"
@@ -43,7 +45,11 @@ class PushingEnv(MujocoPixelEnv):
     layout_version = 2  # 2: pucks start GAP_START = 1.7 widths out (1: 1.3)
 
     def __init__(self, task="push_close", cameras=("front",), image_size=64, spread="seen", render_mode=None,
-                 objects=None, action_repeat: int = 1):
+                 objects=None, action_repeat: int = 1, near_start: float | None = None):
+        if near_start is not None and not 0.6 <= near_start <= GAP_START:
+            raise ValueError(f"near_start {near_start}: puck widths from the centre line, in [0.6, {GAP_START}]")
+        # Training curricula: each episode's pucks start a gap drawn between near_start and GAP_START.
+        self.near_start = near_start
         super().__init__(task, cameras, image_size, spread, render_mode, objects, action_repeat)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
         m = self.model
@@ -56,7 +62,8 @@ class PushingEnv(MujocoPixelEnv):
         rel = self.task.relation
         side = rng.choice([-1.0, 1.0])
         if rel in ("close_to", "inside_of", "on_top_of", "below", "in_between"):
-            xs, ys = [side * GAP_START * w, -side * GAP_START * w, 0.0], [0.5 * w, 0.5 * w, 0.5 * w]
+            gap = GAP_START if self.near_start is None else rng.uniform(self.near_start, GAP_START)
+            xs, ys = [side * gap * w, -side * gap * w, 0.0], [0.5 * w, 0.5 * w, 0.5 * w]
         elif rel == "left_of":
             xs, ys = [1.2 * w, -1.2 * w], [0.5 * w, 0.5 * w]
         elif rel == "right_of":

@@ -105,6 +105,10 @@ class TrainConfig:
     lift_ceiling: float = 0.0
     """tabletop tasks: the gripper's origin stays at most this many metres above the table (the held
     block's centre 0.056 below it; the workspace's top is 0.33); 0: no ceiling below the workspace's"""
+    near_start: float = 0.0
+    """push tasks: training episodes' pucks start between this many puck widths from the centre
+    line and the scene's 1.7, drawn per episode (a curriculum of nearer starts); evaluation keeps
+    1.7; 0: off"""
     vice_update_every: int = 4000
     """--reward vice: every this many env steps the goal classifier takes 50 Adam steps on the
     policy's latest frames beside the frames it was fitted on, as Fu et al. (2018) train VICE
@@ -128,7 +132,8 @@ class TrainConfig:
     # run made before they existed still matches its configuration.
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0,
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
-             "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0}
+             "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0,
+             "near_start": 0.0}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
@@ -146,6 +151,8 @@ class TrainConfig:
         if self.augment_shift < 0 or (self.augment_shift and not self.pixels):
             raise ValueError(f"augment_shift shifts the pixel view: >= 0, and 0 without pixels; got "
                              f"{self.augment_shift} with pixels={self.pixels}")
+        if self.near_start and not 0.6 <= self.near_start <= 1.7:
+            raise ValueError(f"near_start must lie in [0.6, 1.7] puck widths (0: off), got {self.near_start}")
         if self.lift_ceiling < 0:
             raise ValueError(f"lift_ceiling must be >= 0 (0: the workspace's top), got {self.lift_ceiling}")
         if self.vice_update_every < 0:

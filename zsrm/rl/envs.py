@@ -16,17 +16,18 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 import zsrm.envs  # noqa: F401  (registers the scenes)
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.goals import goal_camera, is_pendulum, scene_goal, task_entry
-from zsrm.tasks.catalogue import PENDULUM_ID, TABLETOP_ID, choice_colour
+from zsrm.tasks.catalogue import PENDULUM_ID, PUSHING_ID, TABLETOP_ID, choice_colour
 
 EPISODE_STEPS = 100
 
 
 def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
-             distractors: tuple[str, ...] = (), workers: int = 1) -> VecEnv:
+             distractors: tuple[str, ...] = (), workers: int = 1, training: bool = False) -> VecEnv:
     """``n_envs`` scenes of the goal, seeded ``seed, seed + 1, ...``, in this process or split over
     ``workers`` processes (:class:`~zsrm.rl.workers.WorkerVecEnv`: the same numbers); with
     ``distractors``, colours the goal does not name are in the scene too (at the back of the
-    table; with ``cfg.choice``, the one distractor in line, :func:`choice_colour`'s by default)."""
+    table; with ``cfg.choice``, the one distractor in line, :func:`choice_colour`'s by default).
+    ``training`` envs start as ``cfg.near_start`` says (a curriculum); evaluation's never do."""
     if cfg.scene:
         return make_scene_vec(cfg, n_envs, seed, spread, distractors, workers)
     entry = task_entry(cfg.goal)
@@ -51,6 +52,10 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
         if entry.env_id != TABLETOP_ID:
             raise ValueError(f"lift_ceiling is for the tabletop's gripper; {cfg.goal!r} is not a tabletop task")
         kwargs["lift_ceiling"] = cfg.lift_ceiling
+    if cfg.near_start and training:
+        if entry.env_id != PUSHING_ID:
+            raise ValueError(f"near_start is for the pushing scene's pucks; {cfg.goal!r} is not a pushing task")
+        kwargs["near_start"] = cfg.near_start
     decisions = EPISODE_STEPS // cfg.action_repeat
     return vec_of([lambda: gym.make(entry.env_id, max_episode_steps=decisions, **kwargs)] * n_envs, seed, workers)
 

@@ -268,7 +268,7 @@ def rewarded_env(cfg: TrainConfig, out: Path, done_steps: int, workers: int = 1)
     """The training envs (stepped by ``workers`` processes) with the reward ``cfg.reward`` names,
     the callbacks it needs while PPO trains and the modules a checkpoint must keep for it
     (curiosity's ICM)."""
-    venv = make_vec(cfg, cfg.n_envs, cfg.seed * 10_000 + done_steps, workers=workers)
+    venv = make_vec(cfg, cfg.n_envs, cfg.seed * 10_000 + done_steps, workers=workers, training=True)
     if cfg.reward == "curiosity":
         curiosity = VecCuriosity(venv, goal_camera(cfg.goal, cfg.scene), seed=cfg.seed)
         return curiosity, [ICMUpdate(curiosity)], {"icm.safetensors": curiosity.icm}
