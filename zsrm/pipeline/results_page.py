@@ -214,6 +214,8 @@ FIGURES = [
     Figure("Learning from pixels, the default learner (v3) on the nine relations' tasks: final success rate "
            "(the goal holds at an episode's last step), 300k env steps, 3 seeds", "rl/learning.json", _nine,
            _recorded_command),
+    Figure("Learning from pixels, v3 at 500k env steps on four placing tasks (in between, in front of, behind, inside of): "
+           "final success rate, 3 seeds", "rl/500k/learning.json", _nine, _recorded_command, headline=False),
     Figure("Learning from pixels, the v2 learner (the default until 2026-12-06), final oracle episode reward",
            "rl/v2/learning.json", _learning, _recorded_command),
     Figure("Table 2 in colour frames (the paper's setting): the paper's three, behaviour cloning",
