@@ -21,6 +21,15 @@ PUSHER_Z = TABLE_TOP + 0.03
 GAP_START = 1.7
 # A puck's centre stays this far inside X_RANGE, so the pusher fits behind it (2-3 half-widths).
 PUCK_X_MAX = X_RANGE[1] - 2 * PUCK_HALF
+NEAR_START_MIN = 0.6  # the nearest a curriculum may start the pucks (puck widths from the centre line)
+
+
+def check_near_start(near_start: float) -> float:
+    """A curriculum's nearest start gap, in [NEAR_START_MIN, GAP_START] puck widths; ValueError otherwise."""
+    if not NEAR_START_MIN <= near_start <= GAP_START:
+        raise ValueError(f"near_start {near_start}: puck widths from the centre line, in [{NEAR_START_MIN}, "
+                         f"{GAP_START}]")
+    return float(near_start)
 
 
 class PushingEnv(MujocoPixelEnv):
@@ -46,10 +55,8 @@ class PushingEnv(MujocoPixelEnv):
 
     def __init__(self, task="push_close", cameras=("front",), image_size=64, spread="seen", render_mode=None,
                  objects=None, action_repeat: int = 1, near_start: float | None = None):
-        if near_start is not None and not 0.6 <= near_start <= GAP_START:
-            raise ValueError(f"near_start {near_start}: puck widths from the centre line, in [0.6, {GAP_START}]")
         # Training curricula: each episode's pucks start a gap drawn between near_start and GAP_START.
-        self.near_start = near_start
+        self.near_start = None if near_start is None else check_near_start(near_start)
         super().__init__(task, cameras, image_size, spread, render_mode, objects, action_repeat)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
         m = self.model

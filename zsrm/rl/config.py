@@ -151,8 +151,10 @@ class TrainConfig:
         if self.augment_shift < 0 or (self.augment_shift and not self.pixels):
             raise ValueError(f"augment_shift shifts the pixel view: >= 0, and 0 without pixels; got "
                              f"{self.augment_shift} with pixels={self.pixels}")
-        if self.near_start and not 0.6 <= self.near_start <= 1.7:
-            raise ValueError(f"near_start must lie in [0.6, 1.7] puck widths (0: off), got {self.near_start}")
+        if self.near_start:  # 0: off
+            from zsrm.envs.pushing import check_near_start
+
+            check_near_start(self.near_start)
         if self.lift_ceiling < 0:
             raise ValueError(f"lift_ceiling must be >= 0 (0: the workspace's top), got {self.lift_ceiling}")
         if self.vice_update_every < 0:
