@@ -5,7 +5,8 @@ import importlib
 import pytest
 
 # base.py's example loads the shipped scene VLM (zsrm/vlm/weights/scene).
-MODULES = ["zsrm.rewards.binarised", "zsrm.rewards.base", "zsrm.rewards.oracle", "zsrm.rewards.wrappers"]
+MODULES = ["zsrm.rewards.binarised", "zsrm.rewards.base", "zsrm.rewards.oracle", "zsrm.rewards.wrappers",
+           "zsrm.rewards.corrected"]
 
 
 @pytest.mark.parametrize("name", MODULES)

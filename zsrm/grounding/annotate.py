@@ -222,11 +222,11 @@ def own_silhouettes(data: ExplorationData, scene: str) -> dict[str, dict[str, Si
             for cam in data.cameras if cam in TABLE_PLANE_CAMERAS}
 
 
-def labelers(data: ExplorationData, cfg: LabelConfig) -> dict[str, SpatialLabeler]:
+def labelers(data: ExplorationData, cfg: LabelConfig, relations=tuple(RELATIONS)) -> dict[str, SpatialLabeler]:
     """The labeler of each scene: its shape's words, its cameras' pixel thresholds, and the
     tilted camera read on the table in metres when the data has its calibration. It relates
     the data's objects (:attr:`ExplorationData.objects`: the colours, and the box if the data
-    can hold it; only tabletop scenes ever hold it)."""
+    can hold it; only tabletop scenes ever hold it), by ``relations`` (data of fewer cameras: theirs)."""
     out = {}
     world = world_thresholds(data, cfg)
     # An own scene: one width for all its objects (its adapter's), captions over its phrases (no shape).
@@ -234,7 +234,8 @@ def labelers(data: ExplorationData, cfg: LabelConfig) -> dict[str, SpatialLabele
     for scene in data.scenes:
         table, shape = data.table_homography.get(scene, {}), caption_shape(scene)
         thresholds = pixel_thresholds(data.block_width_px[scene], shape, world, table, object_width=own_width)
-        out[scene] = SpatialLabeler(thresholds, shape=shape, colours=data.objects, table_homography=table)
+        out[scene] = SpatialLabeler(thresholds, shape=shape, colours=data.objects, relations=relations,
+                                    table_homography=table)
     return out
 
 

@@ -109,6 +109,13 @@ class TrainConfig:
     """push tasks: training episodes' pucks start between this many puck widths from the centre
     line and the scene's 1.7, drawn per episode (a curriculum of nearer starts); evaluation keeps
     1.7; 0: off"""
+    zsrm_correct_every: int = 0
+    """--reward zsrm: every this many env steps the labeler (the VLM's Grad-CAM + Table 1, as zsrm label)
+    labels zsrm_correct_frames of the policy's latest frames and the reward model takes 50 Adam steps on
+    them (zsrm.rewards.corrected): frames the policy reaches that only look like the goal stop paying;
+    0: the reward model stays as loaded"""
+    zsrm_correct_frames: int = 128
+    """--reward zsrm with zsrm_correct_every: frames labelled per update"""
     vice_update_every: int = 4000
     """--reward vice: every this many env steps the goal classifier takes 50 Adam steps on the
     policy's latest frames beside the frames it was fitted on, as Fu et al. (2018) train VICE
@@ -133,7 +140,7 @@ class TrainConfig:
     ADDED = {"start": "above", "layout_version": 1, "choice": False, "init": "", "trunk_size": 0, "pixel_size": 0,
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
              "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0,
-             "near_start": 0.0}
+             "near_start": 0.0, "zsrm_correct_every": 0, "zsrm_correct_frames": 128}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
@@ -157,6 +164,9 @@ class TrainConfig:
             check_near_start(self.near_start)
         if self.lift_ceiling < 0:
             raise ValueError(f"lift_ceiling must be >= 0 (0: the workspace's top), got {self.lift_ceiling}")
+        if self.zsrm_correct_every < 0 or self.zsrm_correct_frames < 1:
+            raise ValueError(f"zsrm_correct_every must be >= 0 (0: off) and zsrm_correct_frames >= 1, got "
+                             f"{self.zsrm_correct_every} and {self.zsrm_correct_frames}")
         if self.vice_update_every < 0:
             raise ValueError(f"vice_update_every must be >= 0 (0: a fixed classifier), got {self.vice_update_every}")
         if self.target_kl < 0:
@@ -188,13 +198,21 @@ class TrainConfig:
             self.reward_model = pinned(self.reward_model)
         else:  # only the zsrm reward reads it: any other run is the same run whatever it says
             self.reward_model = "student"
+        self.drop_unread_settings()
+        if 100 % self.action_repeat:
+            raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
+
+    def drop_unread_settings(self) -> None:
+        """Settings only one reward reads, back to their unwritten values for the others: a sweep
+        shares them across rewards, and any other reward's run is the same run whatever they say."""
+        if self.reward != "zsrm" or not self.zsrm_correct_every:  # only the zsrm reward is corrected
+            self.zsrm_correct_every = self.ADDED["zsrm_correct_every"]
+            self.zsrm_correct_frames = self.ADDED["zsrm_correct_frames"]
         if self.reward != "vice":  # the same for VICE's classifier updates
             self.vice_update_every = self.ADDED["vice_update_every"]
             self.vice_oracle_labels = self.ADDED["vice_oracle_labels"]
         if not self.vice_update_every:  # a classifier fitted once learns nothing from the policy's frames
             self.vice_oracle_labels = self.ADDED["vice_oracle_labels"]
-        if 100 % self.action_repeat:
-            raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
 
     @property
     def episode_decisions(self) -> int:
@@ -251,6 +269,9 @@ def check_scene_run(cfg: TrainConfig) -> None:
         raise ValueError(f"the vice reward fits its goal classifier on zsrm's scripted episodes, which your own "
                          f"scene ({cfg.scene}) has not; train with the oracle, zsrm (--reward-model), base, curiosity or "
                          "random reward")
+    if cfg.zsrm_correct_every:
+        raise ValueError(f"--zsrm-correct-every labels frames of zsrm's own scenes; your own scene ({cfg.scene}) has "
+                         "no calibrated goal labeler in a run yet")
     if cfg.choice:
         raise ValueError("--choice adds a block to zsrm's tabletop; your own scene holds the objects its env holds")
     if cfg.start not in ("auto", "above"):

@@ -10,6 +10,8 @@ wrapped in :class:`zsrm.envs.scene_task.SceneTask` (the goal's role camera, the 
 oracle in ``info``), so that the user's env needs no change."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import gymnasium as gym
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
@@ -111,6 +113,12 @@ def make_reward(cfg: TrainConfig, folder=None):
         from zsrm.envs.adapter import load_adapter
         from zsrm.fullmodel import load_reward_backbone
 
+        if cfg.zsrm_correct_every:
+            from zsrm.rl.corrected import corrected_reward
+
+            if folder is None:
+                raise ValueError("the corrected zsrm reward needs a run folder to keep its model and labeler in")
+            return corrected_reward(cfg, Path(folder).parent)
         objects = load_adapter(cfg.scene).objects if cfg.scene else None
         return ZSRMReward(load_reward_backbone(cfg.reward_model), output=cfg.zsrm_output, objects=objects)
     if cfg.reward == "base":

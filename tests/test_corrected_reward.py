@@ -1,0 +1,106 @@
+"""--zsrm-correct-every: the zsrm reward's model learning the labeler's verdict on the policy's frames."""
+import numpy as np
+import pytest
+import torch
+
+from zsrm.fullmodel.student import StudentConfig, StudentRewardNet
+from zsrm.rewards.corrected import CorrectedZSRMReward
+from zsrm.rl.config import TrainConfig
+from zsrm.testing import ColourVLM
+
+GOAL = "a yellow block on top of a red block"
+
+
+def square_frames(n: int, bar: bool, seed: int) -> np.ndarray:
+    """Dark noise with a bright square in the middle (the goal), and with ``bar`` a bright bar on top."""
+    frames = np.random.default_rng(seed).integers(0, 60, (n, 32, 32, 3), dtype=np.uint8)
+    frames[:, 10:20, 10:20] = 250
+    if bar:
+        frames[:, :4] = 200
+    return frames
+
+
+def bar_free(frames: np.ndarray) -> np.ndarray:
+    """The test's labeler: the goal holds where there is no bar."""
+    return frames[:, :4].mean(axis=(1, 2, 3)) < 120
+
+
+def student() -> StudentRewardNet:
+    torch.manual_seed(0)
+    return StudentRewardNet(StudentConfig(image_size=32, widths=(8, 8, 8, 8), embed_dim=8), ColourVLM(), "testing")
+
+
+def test_a_frame_the_policy_reaches_that_only_looks_like_the_goal_stops_paying_and_the_goal_pays():
+    goal, fake = square_frames(8, False, 0), square_frames(8, True, 1)
+    seen = []
+    reward = CorrectedZSRMReward(student(), lambda f: (seen.append(len(f)), bar_free(f))[1], update_every=16,
+                                 label_frames=8, steps=30, batch_size=16, lr=3e-3, min_each=4, seed=0)
+    for _ in range(40):  # the policy reaches both: 640 frames, 40 updates of 8 labelled frames
+        reward({"front": np.concatenate([goal, fake])}, GOAL)
+    assert set(seen) == {8} and reward.labelled == 320
+    assert 36 <= reward.updates <= 40  # the first waits until 4 of each kind are labelled
+    assert reward({"front": fake}, GOAL).mean() == 0.0
+    assert reward({"front": goal}, GOAL).mean() == 1.0
+    assert (reward.score(fake, GOAL, "margin") < 0).all()
+
+
+def test_no_update_until_the_labeler_has_seen_enough_of_both_kinds():
+    updates = []
+    reward = CorrectedZSRMReward(student(), bar_free, update_every=4, label_frames=4, steps=2, min_each=6,
+                                 on_update=updates.append)
+    goal, fake = square_frames(4, False, 0), square_frames(4, True, 1)
+    for _ in range(3):  # 12 goal frames labelled, no other kind yet
+        reward({"front": goal}, GOAL)
+    assert reward.updates == 0 and reward.labelled_goal == 12
+    reward({"front": fake}, GOAL)  # 4 others: still under 6
+    assert reward.updates == 0
+    reward({"front": fake}, GOAL)
+    assert reward.updates == 1 and updates == [reward.model]
+    with pytest.raises(ValueError, match="must be >= 1"):
+        CorrectedZSRMReward(student(), bar_free, update_every=0)
+
+
+def test_the_correction_is_a_zsrm_setting_written_only_when_on():
+    on = TrainConfig(goal="place_between", reward="zsrm", zsrm_correct_every=5000)
+    assert on.to_dict()["zsrm_correct_every"] == 5000 and on.zsrm_correct_frames == 128
+    off = TrainConfig(goal="place_between", reward="zsrm").to_dict()
+    assert "zsrm_correct_every" not in off and "zsrm_correct_frames" not in off  # committed runs still match
+    # a sweep's shared setting: the other rewards' runs are the same runs whatever it says
+    assert TrainConfig(goal="stack", reward="oracle", zsrm_correct_every=5000) == TrainConfig(goal="stack", reward="oracle")
+    with pytest.raises(ValueError, match="zsrm_correct_every must be >= 0"):
+        TrainConfig(goal="stack", reward="zsrm", zsrm_correct_every=-1)
+    with pytest.raises(ValueError, match="no calibrated goal labeler"):
+        TrainConfig(goal="a red cylinder behind a purple cylinder", scene="examples.own_scene.adapter:OwnScene",
+                    reward="oracle", zsrm_correct_every=5000)
+
+
+def test_the_goal_labeler_agrees_with_the_oracle_on_a_task_scene(tmp_path):
+    from zsrm.grounding.goal_check import GoalLabeler
+    from zsrm.rl.goals import task_entry
+    from zsrm.rl.vice import goal_frames
+    from zsrm.vlm import load_vlm
+
+    cfg = TrainConfig(goal="place_between", reward="zsrm")
+    frames, oracle = goal_frames(cfg, episodes=2)  # scripted and random episodes, the oracle's verdicts
+    labeler = GoalLabeler.calibrated(task_entry(cfg.goal).task, "tabletop", cfg.image_size, tmp_path, load_vlm("scene"))
+    said = labeler(frames)
+    assert oracle.any() and (~oracle).any()
+    assert (said == oracle).mean() >= 0.9
+    assert said[oracle].mean() >= 0.8 and not said[~oracle].mean() > 0.1
+
+
+def test_a_run_with_the_correction_reads_its_latest_model_on_resume(tmp_path):
+    from zsrm.rewards.corrected import CorrectedZSRMReward
+    from zsrm.rl.envs import make_reward
+
+    cfg = TrainConfig(goal="place_between", reward="zsrm", zsrm_correct_every=5000)
+    reward = make_reward(cfg, tmp_path / "vice")
+    assert isinstance(reward, CorrectedZSRMReward) and reward.update_every == 5000 // cfg.action_repeat
+    assert (tmp_path / "goal_labeler" / "manifest.json").is_file()
+    with torch.no_grad():
+        for p in reward.model.parameters():
+            p.add_(0.01)
+    reward.model.save(tmp_path / "zsrm_online")
+    resumed = make_reward(cfg, tmp_path / "vice")
+    for a, b in zip(reward.model.parameters(), resumed.model.parameters()):
+        assert torch.equal(a, b)

@@ -1,0 +1,68 @@
+"""Does one goal hold in a frame? The labeler of Table 1 (Grad-CAM + the relation's rule) asked
+about one goal, for frames a policy reaches (:class:`zsrm.rewards.corrected.CorrectedZSRMReward`).
+
+It is the labeler ``zsrm label`` runs, read on the goal's camera only: the VLM's Grad-CAM points
+of the scene's objects (contrasted with the other colours' phrases), refined to their silhouettes
+on the table-plane camera, and the relation's rule with that camera's thresholds. What it reads:
+the frames, and which objects the goal's scene holds (the goal names them); never the state.
+Its calibration (Grad-CAM cell centres, object widths in pixels, the table's homography) comes from
+a few exploration renders (:func:`zsrm.data.collect.collect`), as ``zsrm label``'s does.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from zsrm.data.collect import CollectConfig, collect
+from zsrm.grounding.annotate import Grounder, LabelConfig, gradcam_objects, labelers
+from zsrm.grounding.labeler import SpatialLabeler
+from zsrm.tasks.catalogue import SCENE_IDS
+from zsrm.tasks.language import Task
+from zsrm.tasks.lexicon import CONTAINERS
+from zsrm.tasks.relations import RELATIONS
+
+CALIBRATION_IMAGES = 16  # exploration renders the labeler is calibrated on (zsrm label: a dataset's first 8)
+
+
+class GoalLabeler:
+    """``labeler(frames)``: (N,) bool, the goal's relation read by Grad-CAM on frames (N, H, W, 3)
+    of the goal's camera of its task scene, which holds the goal's objects.
+
+    Build it with :meth:`calibrated`; ``folder`` keeps the calibration renders (a rerun reads them)."""
+
+    def __init__(self, task: Task, grounder: Grounder, labeler: SpatialLabeler):
+        self.task, self.grounder, self.camera = task, grounder, RELATIONS[task.relation].camera
+        self.labeler = labeler
+        objects = grounder.data.objects  # the colours, then the box where the data can hold it
+        missing = set(task.objects) - set(objects)
+        if missing:
+            raise ValueError(f"the labeler's calibration data hold no {', '.join(sorted(missing))}")
+        self.present = np.isin(np.array(objects, dtype=object), list(task.objects))
+
+    @classmethod
+    def calibrated(cls, task: Task, scene: str, image_size: int, folder: str | Path, vlm, vlm_spec: str = "scene",
+                   box_vlm=None) -> "GoalLabeler":
+        """Calibrated on ``CALIBRATION_IMAGES`` exploration renders of ``scene`` (a zsrm scene name:
+        tabletop or pushing) at ``image_size``, collected into ``folder`` (once)."""
+        if scene not in SCENE_IDS:
+            raise ValueError(f"unknown scene {scene!r}; the goal labeler reads zsrm's scenes: {', '.join(SCENE_IDS)}")
+        camera = RELATIONS[task.relation].camera
+        has_box = any(o in CONTAINERS for o in task.objects)
+        data = collect(CollectConfig(images=CALIBRATION_IMAGES, shard_size=CALIBRATION_IMAGES, scenes=(scene,),
+                                     cameras=(camera,), image_size=image_size, p_box=0.5 if has_box else 0.0),
+                       folder, progress=False)
+        cfg = LabelConfig(vlm=vlm_spec)
+        grounder = Grounder(vlm, cfg, data, box_vlm=box_vlm)
+        return cls(task, grounder, labelers(data, cfg, relations=(task.relation,))[scene])
+
+    def __call__(self, frames: np.ndarray) -> np.ndarray:
+        frames = np.asarray(frames)
+        n = len(frames)
+        arrays = {"scene": np.zeros(n, np.int64), f"images_{self.camera}": frames}
+        if self.grounder.data.has_box:
+            arrays["box_present"] = np.full(n, self.present[-1])
+        pixels = gradcam_objects(self.grounder.data, self.grounder.shard(arrays))
+        present = np.broadcast_to(self.present, (n, len(self.present)))
+        captions = self.labeler.captions(pixels, present)
+        return np.array([self.task.text in c for c in captions], dtype=bool)

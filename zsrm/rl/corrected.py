@@ -1,0 +1,42 @@
+"""``--zsrm-correct-every N``: the zsrm reward corrected by the labeler during training
+(:class:`zsrm.rewards.corrected.CorrectedZSRMReward`).
+
+The labeler is calibrated once per run on a few exploration renders kept in the run folder
+(``goal_labeler/``); the reward model's latest state is kept beside it (``zsrm_online/``), where
+a resumed run picks it up (the labelled frames start afresh, as VICE's do).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from zsrm.common.files import write_json
+from zsrm.fullmodel import load_reward_backbone
+from zsrm.grounding.goal_check import GoalLabeler
+from zsrm.rewards.corrected import CorrectedZSRMReward
+from zsrm.rl.config import TrainConfig
+from zsrm.rl.goals import task_entry
+from zsrm.tasks.catalogue import PUSHING_ID
+from zsrm.vlm import load_vlm
+
+
+def corrected_reward(cfg: TrainConfig, out: str | Path) -> CorrectedZSRMReward:
+    """The zsrm reward of ``cfg`` whose model learns, every ``cfg.zsrm_correct_every`` env steps,
+    from ``cfg.zsrm_correct_frames`` of the policy's frames labelled by ``cfg.vlm``'s Grad-CAM."""
+    out = Path(out)
+    entry = task_entry(cfg.goal)
+    scene = "pushing" if entry.env_id == PUSHING_ID else "tabletop"
+    box_vlm = load_vlm("scene-box") if cfg.vlm == "scene" and "box" in entry.task.objects else None
+    labeler = GoalLabeler.calibrated(entry.task, scene, cfg.image_size, out / "goal_labeler", load_vlm(cfg.vlm),
+                                     vlm_spec=cfg.vlm, box_vlm=box_vlm)
+    latest = out / "zsrm_online"
+    model = load_reward_backbone(latest if (latest / "config.json").is_file() else cfg.reward_model)
+    reward = CorrectedZSRMReward(model, labeler, update_every=max(1, cfg.zsrm_correct_every // cfg.action_repeat),
+                                 label_frames=cfg.zsrm_correct_frames, seed=cfg.seed, output=cfg.zsrm_output)
+
+    def keep(model) -> None:  # the latest model, and what the labeler said so far (since the last resume)
+        model.save(latest)
+        write_json(latest / "corrections.json", {"updates": reward.updates, "labelled": reward.labelled,
+                                                 "labelled_goal": reward.labelled_goal})
+
+    reward.on_update = keep
+    return reward
