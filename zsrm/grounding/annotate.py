@@ -135,14 +135,16 @@ class Grounder:
         return {scene: {cam: {k: v.to_json() for k, v in sils.items()} for cam, sils in cams.items()}
                 for scene, cams in self.silhouettes.items()}
 
-    def shard(self, arrays: dict) -> dict[str, np.ndarray]:
+    def shard(self, arrays: dict, colours=None) -> dict[str, np.ndarray]:
         """Per camera: ``gradcam_xy_<cam>`` (n, 4, 2), ``gradcam_score_<cam>``,
         ``gradcam_peak_<cam>`` (n, 4), ``gradcam_map_<cam>`` (n, 4, h, w) float16; NaN or
-        0 for colours the data never holds. With the box (``arrays`` holding ``box_present``):
+        0 for colours the data never holds (and for those not in ``colours``, where given: Grad-CAM
+        of the others alone, which are the same, each phrase's map its own). With the box (``arrays`` holding ``box_present``):
         ``gradcam_box_xy_<cam>`` (n, 2), ``gradcam_box_score_<cam>``, ``gradcam_box_peak_<cam>``
         (n,), ``gradcam_box_map_<cam>`` (n, h, w), NaN or 0 where the scene has no box."""
         n, k = len(arrays["scene"]), len(self.data.colours)
-        cols = [self.data.colours.index(c) for c in self.allowed]
+        located = [c for c in self.allowed if colours is None or c in colours]
+        cols = [self.data.colours.index(c) for c in located]
         out = {}
         for cam in self.data.cameras:
             xy = np.full((n, k, 2), np.nan, np.float32)
@@ -154,7 +156,7 @@ class Grounder:
                 if not len(rows):
                     continue
                 images = arrays[f"images_{cam}"][rows]
-                res = self.gradcam[scene](images, phrases_for(scene, self.allowed))
+                res = self.gradcam[scene](images, phrases_for(scene, located))
                 if maps is None:
                     maps = np.zeros((n, k) + res.maps.shape[-2:], np.float16)
                 sil = self.silhouettes.get(scene, {}).get(cam)

@@ -62,7 +62,7 @@ class GoalLabeler:
         arrays = {"scene": np.zeros(n, np.int64), f"images_{self.camera}": frames}
         if self.grounder.data.has_box:
             arrays["box_present"] = np.full(n, self.present[-1])
-        pixels = gradcam_objects(self.grounder.data, self.grounder.shard(arrays))
+        pixels = gradcam_objects(self.grounder.data, self.grounder.shard(arrays, colours=self.task.objects))
         present = np.broadcast_to(self.present, (n, len(self.present)))
         captions = self.labeler.captions(pixels, present)
         return np.array([self.task.text in c for c in captions], dtype=bool)
