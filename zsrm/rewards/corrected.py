@@ -4,7 +4,7 @@ A policy finds frames the reward model was never taught: on "a yellow block in b
 block and a green block" a policy trained on the shipped student learnt to hold the block high in
 one place, which the student paid for in 0.95 of decisions and the oracle in 0.44
 (``probes/reward_hacking.py``). The labeler that made the student's training data (Grad-CAM +
-Table 1, :class:`zsrm.grounding.goal_check.GoalLabeler`) reads those frames right (0.996 agreement
+Table 1, :class:`zsrm.grounding.goal_check.GoalLabeler`) reads those frames right (0.994 agreement
 with the oracle there), but is too slow for every step. So, every ``update_every`` frames the
 policy reaches, a sample of them is labelled by it and the reward model takes a few steps on
 them: a frame the policy keeps reaching that only looks like the goal stops paying. This is the

@@ -11,23 +11,31 @@ from pathlib import Path
 
 from zsrm.common.files import write_json
 from zsrm.fullmodel import load_reward_backbone
+from zsrm.grounding.annotate import BOX_VLM, DEFAULT_VLM
 from zsrm.grounding.goal_check import GoalLabeler
 from zsrm.rewards.corrected import CorrectedZSRMReward
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.goals import task_entry
 from zsrm.tasks.catalogue import PUSHING_ID
+from zsrm.tasks.lexicon import BOX
 from zsrm.vlm import load_vlm
+
+
+def goal_labeler(cfg: TrainConfig, folder: str | Path) -> GoalLabeler:
+    """The labeler of ``cfg.goal`` in its task scene, read through ``cfg.vlm`` (and the box-aware
+    scene VLM for a goal with the box, as ``zsrm label`` reads the box), calibrated into ``folder``."""
+    entry = task_entry(cfg.goal)
+    scene = "pushing" if entry.env_id == PUSHING_ID else "tabletop"
+    box_vlm = load_vlm(BOX_VLM) if cfg.vlm == DEFAULT_VLM and BOX in entry.task.objects else None
+    return GoalLabeler.calibrated(entry.task, scene, cfg.image_size, folder, load_vlm(cfg.vlm), vlm_spec=cfg.vlm,
+                                  box_vlm=box_vlm)
 
 
 def corrected_reward(cfg: TrainConfig, out: str | Path) -> CorrectedZSRMReward:
     """The zsrm reward of ``cfg`` whose model learns, every ``cfg.zsrm_correct_every`` env steps,
     from ``cfg.zsrm_correct_frames`` of the policy's frames labelled by ``cfg.vlm``'s Grad-CAM."""
     out = Path(out)
-    entry = task_entry(cfg.goal)
-    scene = "pushing" if entry.env_id == PUSHING_ID else "tabletop"
-    box_vlm = load_vlm("scene-box") if cfg.vlm == "scene" and "box" in entry.task.objects else None
-    labeler = GoalLabeler.calibrated(entry.task, scene, cfg.image_size, out / "goal_labeler", load_vlm(cfg.vlm),
-                                     vlm_spec=cfg.vlm, box_vlm=box_vlm)
+    labeler = goal_labeler(cfg, out / "goal_labeler")
     latest = out / "zsrm_online"
     model = load_reward_backbone(latest if (latest / "config.json").is_file() else cfg.reward_model)
     reward = CorrectedZSRMReward(model, labeler, update_every=max(1, cfg.zsrm_correct_every // cfg.action_repeat),
