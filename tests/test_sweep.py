@@ -95,3 +95,18 @@ def test_gather_keeps_both_ways_of_acting_and_the_core_hours():
     older = run(2, (50.0, 0.5), (50.0, 0.5), 3600.0)
     del older["final_by_actions"]  # a run from before both were recorded: the cell has only final_*
     assert "final_by_actions" not in gather([run(0, (90.0, 1.0), (80.0, 0.8), 1800.0), older])["stack"]["zsrm"]
+
+
+def test_settings_reach_every_trial_and_the_recorded_command():
+    from zsrm.pipeline.learn import Sweep
+
+    sweep = Sweep(tasks=("place_between",), rewards=("zsrm", "oracle"), seeds=(0,), root="runs/x",
+                  settings=("zsrm-correct-every=5000", "gamma=0.99"))
+    configs = {t["name"]: t["config"] for t in sweep.trials()}
+    assert configs["place_between-zsrm-0"]["zsrm_correct_every"] == 5000
+    assert configs["place_between-oracle-0"]["gamma"] == 0.99
+    assert "zsrm_correct_every" not in configs["place_between-oracle-0"]  # only the zsrm reward reads it
+    command = sweep.meta(1, 2)["command"]
+    assert "--settings zsrm-correct-every=5000 gamma=0.99" in command and "--root runs/x" in command
+    with pytest.raises(ValueError, match="KEY=VALUE with KEY a zsrm train setting"):
+        Sweep(settings=("no-such-setting=1",)).overrides()

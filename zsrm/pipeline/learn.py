@@ -5,6 +5,7 @@ Heavy imports (torch, SB3, Ray, MuJoCo) happen inside ``run``, so ``zsrm --help`
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import platform
 import shlex
@@ -82,6 +83,27 @@ class Rollout:
         return 0
 
 
+def parse_settings(settings) -> dict:
+    """``KEY=VALUE`` strings (KEY as zsrm train's option or its field: zsrm-correct-every or
+    zsrm_correct_every) to TrainConfig settings, each VALUE read as JSON where it is (numbers, true,
+    false), else as a string.
+
+    >>> parse_settings(["gamma=0.99", "zsrm-correct-every=5000", "start=around"])
+    {'gamma': 0.99, 'zsrm_correct_every': 5000, 'start': 'around'}
+    """
+    known, out = {f.name for f in dataclasses.fields(TrainConfig)}, {}
+    for item in settings:
+        key, sep, value = item.partition("=")
+        key = key.strip().lstrip("-").replace("-", "_")
+        if not sep or key not in known:
+            raise ValueError(f"--settings takes KEY=VALUE with KEY a zsrm train setting, got {item!r}")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
 def absolute_if_folder(spec: str) -> str:
     """A model spec that names an existing folder, made absolute; any other spec unchanged."""
     return str(Path(spec).resolve()) if spec and Path(spec).is_dir() else spec
@@ -105,6 +127,7 @@ class Sweep:
     init_root: str | None = None  # start each trial from the policy of the trial of its name under here
     config: PresetName = "cpu"  # TrainConfig preset of every trial (cpu, the default: v3, issue 52's learner, since 2026-12-06; v2: before then; v1: before 2026-12-04)
     scene: str | None = None  # your own scene (module:Class or a registered id) whose objects --tasks name (docs/own-scene.md)
+    settings: tuple[str, ...] = ()  # other TrainConfig settings of every trial, KEY=VALUE each as zsrm train takes them (gamma=0.99 zsrm-correct-every=5000)
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
 
     def run(self) -> int:
@@ -140,7 +163,7 @@ class Sweep:
         # A model folder by its absolute path: Ray Tune runs each trial in its own working directory.
         if self.config not in PRESETS:
             raise ValueError(f"unknown config {self.config!r}; choose one of {', '.join(PRESETS)}")
-        return {**PRESETS[self.config], **self.train, "steps": self.steps,
+        return {**PRESETS[self.config], **parse_settings(self.settings), **self.train, "steps": self.steps,
                 "reward_model": absolute_if_folder(self.reward_model),
                 "vlm": absolute_if_folder(self.vlm), **({"scene": self.scene} if self.scene else {})}
 
@@ -159,6 +182,8 @@ class Sweep:
                 "command": f"zsrm sweep --tasks {shlex.join(self.tasks)} --rewards {' '.join(self.rewards)} "
                            f"--seeds {' '.join(map(str, self.seeds))} --steps {self.steps} --out {self.out}"
                            + (f" --config {self.config}" if self.config != "cpu" else "")
+                           + (f" --settings {shlex.join(self.settings)}" if self.settings else "")
+                           + (f" --root {self.root}" if self.root != "runs/rl" else "")
                            + (f" --scene {self.scene}" if self.scene else "")
                            + (f" --vlm {self.vlm}" if self.vlm != "scene" else "")
                            + (f" --reward-model {self.reward_model}" if self.reward_model != "student" else ""),

@@ -216,6 +216,9 @@ FIGURES = [
            _recorded_command),
     Figure("Learning from pixels, v3 at 500k env steps on four placing tasks (in between, in front of, behind, inside of): "
            "final success rate, 3 seeds", "rl/500k/learning.json", _nine, _recorded_command, headline=False),
+    Figure("Learning from pixels, v3 with the zsrm reward corrected by the labeler on the policy's frames "
+           "(--zsrm-correct-every 5000): final success rate, 300k env steps, 3 seeds", "rl/corrected/learning.json",
+           _nine, _recorded_command, headline=False),
     Figure("Learning from pixels, the v2 learner (the default until 2026-12-06), final oracle episode reward",
            "rl/v2/learning.json", _learning, _recorded_command),
     Figure("Table 2 in colour frames (the paper's setting): the paper's three, behaviour cloning",
@@ -331,7 +334,8 @@ SIDE = [
      "--p-hold-free 0.5): in between 0.93, inside of lost; not shipped (docs/training.md, issue 52)"),
     ("side/rl/reward_hacking_place_between_500k.json", "a place_between zsrm policy (500k, seed 1) holds the yellow "
      "block 0.27 m above the table wherever the others are: the student pays in 0.95 of decisions, the oracle "
-     "in 0.44 (probes/reward_hacking.py)"),
+     "in 0.44, the goal labeler (Grad-CAM + Table 1) in 0.43, agreeing with the oracle in 0.994 "
+     "(probes/reward_hacking.py --labeler)"),
     ("side/rl/reward_hacking_place_between_ceiling0.18.json", "the same with --lift-ceiling 0.18 (300k, seed 0): "
      "held 0.12 m up, the student pays in 0.78, the oracle in 0.53"),
     ("side/rl/push_close_ends.json", "a push_close oracle policy (500k, seed 0) by start side, and its 20 of 30 "
