@@ -338,6 +338,9 @@ SIDE = [
      "(probes/reward_hacking.py --labeler)"),
     ("side/rl/reward_hacking_place_between_ceiling0.18.json", "the same with --lift-ceiling 0.18 (300k, seed 0): "
      "held 0.12 m up, the student pays in 0.78, the oracle in 0.53"),
+    ("side/rl/reward_hacking_place_inside_corrected.json", "a place_inside zsrm policy trained with the corrected "
+     "reward (--zsrm-correct-every 5000 --gamma 0.99, seed 0; scored 0): the block rests 0.18 m from the box, the "
+     "goal labeler says inside of in 0.29 of decisions, the oracle in none (probes/reward_hacking.py --labeler)"),
     ("side/rl/push_close_ends.json", "a push_close oracle policy (500k, seed 0) by start side, and its 20 of 30 "
      "episodes that never succeed: the pucks end 14.5 cm apart (close to: under 10), the nearest 14.3: the push "
      "stops short (probes/push_sides.py)"),
