@@ -85,6 +85,12 @@ def test_the_goal_labeler_agrees_with_the_oracle_on_a_task_scene(tmp_path):
     labeler = GoalLabeler.calibrated(task_entry(cfg.goal).task, "tabletop", cfg.image_size, tmp_path, load_vlm("scene"))
     said = labeler(frames)
     assert oracle.any() and (~oracle).any()
+    # Grad-CAM of the goal's objects alone gives their points as of every colour's (each map its own)
+    arrays = {"scene": np.zeros(8, np.int64), "images_front": frames[:8]}
+    every, goal_only = labeler.grounder.shard(arrays), labeler.grounder.shard(arrays, colours=labeler.task.objects)
+    located = [i for i, c in enumerate(labeler.grounder.data.colours) if c in labeler.task.objects]
+    np.testing.assert_array_equal(every["gradcam_xy_front"][:, located], goal_only["gradcam_xy_front"][:, located])
+    assert np.isnan(goal_only["gradcam_xy_front"][:, [i for i in range(4) if i not in located]]).all()
     assert (said == oracle).mean() >= 0.9
     assert said[oracle].mean() >= 0.8 and not said[~oracle].mean() > 0.1
 
