@@ -17,7 +17,6 @@ import numpy as np
 from zsrm.data.collect import CollectConfig, collect
 from zsrm.grounding.annotate import Grounder, LabelConfig, gradcam_objects, labelers
 from zsrm.grounding.labeler import SpatialLabeler
-from zsrm.rewards.interface import check_images
 from zsrm.tasks.catalogue import SCENE_IDS
 from zsrm.tasks.language import Task
 from zsrm.tasks.lexicon import CONTAINERS
@@ -58,7 +57,7 @@ class GoalLabeler:
         return cls(task, grounder, labelers(data, cfg, relations=(task.relation,))[scene])
 
     def __call__(self, frames: np.ndarray) -> np.ndarray:
-        frames = check_images(frames, "frames")
+        frames = np.asarray(frames)  # checked by Grad-CAM (zsrm.grounding.gradcam)
         n = len(frames)
         arrays = {"scene": np.zeros(n, np.int64), f"images_{self.camera}": frames}
         if self.grounder.data.has_box:
