@@ -100,13 +100,13 @@ def test_a_run_with_the_correction_reads_its_latest_model_on_resume(tmp_path):
     from zsrm.rl.envs import make_reward
 
     cfg = TrainConfig(goal="place_between", reward="zsrm", zsrm_correct_every=5000)
-    reward = make_reward(cfg, tmp_path / "vice")
+    reward = make_reward(cfg, tmp_path)
     assert isinstance(reward, CorrectedZSRMReward) and reward.update_every == 5000 // cfg.action_repeat
     assert (tmp_path / "goal_labeler" / "manifest.json").is_file()
     with torch.no_grad():
         for p in reward.model.parameters():
             p.add_(0.01)
     reward.model.save(tmp_path / "zsrm_online")
-    resumed = make_reward(cfg, tmp_path / "vice")
+    resumed = make_reward(cfg, tmp_path)
     for a, b in zip(reward.model.parameters(), resumed.model.parameters()):
         assert torch.equal(a, b)

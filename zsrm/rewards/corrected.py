@@ -86,7 +86,7 @@ class CorrectedZSRMReward(ZSRMReward):
                 if kind not in self.banks:
                     self.banks[kind] = FrameBank(sample[:0], self.memory)
                 self.banks[kind].add(sample[holds == kind])
-        if min((len(b) for b in self.banks.values()), default=0) < self.min_each or len(self.banks) < 2:
+        if len(self.banks) < 2 or min(len(b) for b in self.banks.values()) < self.min_each:
             return
         self.train_steps(goal)
         self.updates += 1

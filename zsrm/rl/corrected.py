@@ -16,7 +16,7 @@ from zsrm.grounding.goal_check import GoalLabeler
 from zsrm.rewards.corrected import CorrectedZSRMReward
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.goals import task_entry
-from zsrm.tasks.catalogue import PUSHING_ID
+from zsrm.tasks.catalogue import SCENE_IDS
 from zsrm.tasks.lexicon import BOX
 from zsrm.vlm import load_vlm
 
@@ -25,7 +25,7 @@ def goal_labeler(cfg: TrainConfig, folder: str | Path) -> GoalLabeler:
     """The labeler of ``cfg.goal`` in its task scene, read through ``cfg.vlm`` (and the box-aware
     scene VLM for a goal with the box, as ``zsrm label`` reads the box), calibrated into ``folder``."""
     entry = task_entry(cfg.goal)
-    scene = "pushing" if entry.env_id == PUSHING_ID else "tabletop"
+    scene = next(name for name, env_id in SCENE_IDS.items() if env_id == entry.env_id)
     box_vlm = load_vlm(BOX_VLM) if cfg.vlm == DEFAULT_VLM and BOX in entry.task.objects else None
     return GoalLabeler.calibrated(entry.task, scene, cfg.image_size, folder, load_vlm(cfg.vlm), vlm_spec=cfg.vlm,
                                   box_vlm=box_vlm)

@@ -99,12 +99,13 @@ def make_scene_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen
     return vec_of([make] * n_envs, seed, workers)
 
 
-def make_reward(cfg: TrainConfig, folder=None):
+def make_reward(cfg: TrainConfig, run_folder=None):
     """The RewardModel that ``cfg.reward`` names: oracle, zsrm, base (the VLM ``cfg.vlm``'s cosine
     of the frame and the goal, paper 2.1; for the pendulum binarised: 1 when the goal beats the
     other poses' sentences, :data:`zsrm.tasks.pendulum.NEGATIVES`) or vice (a goal classifier
-    fitted on true goal images, kept in ``folder``); None for the rewards that are not a
-    RewardModel (random, curiosity)."""
+    fitted on true goal images, kept in ``run_folder/vice``); None for the rewards that are not a
+    RewardModel (random, curiosity). The zsrm reward with ``cfg.zsrm_correct_every`` keeps its
+    labeler and latest model in ``run_folder`` too (:mod:`zsrm.rl.corrected`)."""
     from zsrm.rewards import BaseReward, OracleReward, ZSRMReward
 
     if cfg.reward == "oracle":
@@ -116,9 +117,9 @@ def make_reward(cfg: TrainConfig, folder=None):
         if cfg.zsrm_correct_every:
             from zsrm.rl.corrected import corrected_reward
 
-            if folder is None:
+            if run_folder is None:
                 raise ValueError("the corrected zsrm reward needs a run folder to keep its model and labeler in")
-            return corrected_reward(cfg, Path(folder).parent)
+            return corrected_reward(cfg, run_folder)
         objects = load_adapter(cfg.scene).objects if cfg.scene else None
         return ZSRMReward(load_reward_backbone(cfg.reward_model), output=cfg.zsrm_output, objects=objects)
     if cfg.reward == "base":
@@ -132,7 +133,7 @@ def make_reward(cfg: TrainConfig, folder=None):
     if cfg.reward == "vice":
         from zsrm.rl.vice import vice_reward
 
-        if folder is None:
-            raise ValueError("the vice reward needs a folder to keep its goal classifier in")
-        return vice_reward(cfg, folder)
+        if run_folder is None:
+            raise ValueError("the vice reward needs a run folder to keep its goal classifier in")
+        return vice_reward(cfg, Path(run_folder) / "vice")
     return None

@@ -272,7 +272,7 @@ def rewarded_env(cfg: TrainConfig, out: Path, done_steps: int, workers: int = 1)
     if cfg.reward == "curiosity":
         curiosity = VecCuriosity(venv, goal_camera(cfg.goal, cfg.scene), seed=cfg.seed)
         return curiosity, [ICMUpdate(curiosity)], {"icm.safetensors": curiosity.icm}
-    reward = make_reward(cfg, out / "vice")
+    reward = make_reward(cfg, out)
     return VecZeroShotReward(venv, reward, goal_text(cfg.goal, cfg.scene)), [], {}
 
 
