@@ -64,11 +64,16 @@ def test_the_correction_is_a_zsrm_setting_written_only_when_on():
     on = TrainConfig(goal="place_between", reward="zsrm", zsrm_correct_every=5000)
     assert on.to_dict()["zsrm_correct_every"] == 5000 and on.zsrm_correct_frames == 128
     off = TrainConfig(goal="place_between", reward="zsrm").to_dict()
-    assert "zsrm_correct_every" not in off and "zsrm_correct_frames" not in off  # committed runs still match
+    assert not {"zsrm_correct_every", "zsrm_correct_frames", "zsrm_correct_box_width"} & set(off)  # committed runs match
+    assert "zsrm_correct_box_width" not in on.to_dict()  # 0: the labeler as zsrm label's
     # a sweep's shared setting: the other rewards' runs are the same runs whatever it says
-    assert TrainConfig(goal="stack", reward="oracle", zsrm_correct_every=5000) == TrainConfig(goal="stack", reward="oracle")
-    with pytest.raises(ValueError, match="zsrm_correct_every must be >= 0"):
-        TrainConfig(goal="stack", reward="zsrm", zsrm_correct_every=-1)
+    assert TrainConfig(goal="stack", reward="oracle", zsrm_correct_every=5000,
+                       zsrm_correct_box_width=0.085) == TrainConfig(goal="stack", reward="oracle")
+    assert TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_box_width=0.085) == TrainConfig(
+        goal="place_inside", reward="zsrm")  # read only by the correction
+    for bad in ({"zsrm_correct_every": -1}, {"zsrm_correct_box_width": -0.1}):
+        with pytest.raises(ValueError, match="must be >= 0"):
+            TrainConfig(goal="stack", reward="zsrm", **bad)
     with pytest.raises(ValueError, match="no calibrated goal labeler"):
         TrainConfig(goal="a red cylinder behind a purple cylinder", scene="examples.own_scene.adapter:OwnScene",
                     reward="oracle", zsrm_correct_every=5000)
@@ -110,3 +115,39 @@ def test_a_run_with_the_correction_reads_its_latest_model_on_resume(tmp_path):
     resumed = make_reward(cfg, tmp_path)
     for a, b in zip(reward.model.parameters(), resumed.model.parameters()):
         assert torch.equal(a, b)
+
+
+def drop_and_hover(env):
+    """Carry the goal's block away from the box, let it go on the table, then hover above it."""
+    base, steps = env.unwrapped, [0]
+
+    def act():
+        steps[0] += 1
+        box, block = base.object_positions()["box"], base.object_positions()["yellow"]
+        if steps[0] < 4:
+            return np.array([np.sign(block[0] - box[0]) or 1.0, 0.0, -0.3, 1.0])
+        return np.array([*np.clip((block + (0, 0, 0.2) - base.gripper_position) / 0.025, -1, 1), -1.0])
+    return act
+
+
+def test_the_box_width_check_stops_a_box_point_on_a_block_reading_inside_of(tmp_path):
+    from zsrm.envs.rollout import episode_steps, make_env
+    from zsrm.envs.scripted import scripted_controller
+    from zsrm.rl.corrected import goal_labeler
+
+    cfg = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000, zsrm_correct_box_width=0.085)
+    env = make_env("a yellow block inside of a box", cameras=("tilted",), image_size=cfg.image_size)
+    runs = {}  # a layout (seed 903) where the box's Grad-CAM point lands on the block resting 0.2 m from the box
+    for name, policy, seed in (("dropped", drop_and_hover, 903), ("scripted", scripted_controller, 0)):
+        steps = list(episode_steps(env, policy, seed=seed))[5::3]
+        runs[name] = np.stack([obs["tilted"] for _, obs, _, _ in steps]), np.array([i["is_success"] for _, _, i, _ in steps])
+    env.close()
+    labeler = goal_labeler(cfg, tmp_path)
+    assert labeler.grounder.box_min_width == 0.085
+    checked = {name: labeler(frames) for name, (frames, _) in runs.items()}
+    labeler.grounder.box_min_width = 0.0  # the labeler as zsrm label's
+    unchecked = {name: labeler(frames) for name, (frames, _) in runs.items()}
+    assert not runs["dropped"][1].any() and unchecked["dropped"].mean() > 0.5 and checked["dropped"].mean() < 0.1
+    goal = runs["scripted"][1]
+    assert goal.sum() >= 5 and checked["scripted"][goal].mean() >= 0.7
+    np.testing.assert_array_equal(checked["scripted"][goal], unchecked["scripted"][goal])  # no goal frame lost

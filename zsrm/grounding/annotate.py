@@ -40,7 +40,7 @@ from zsrm.data.dataset import LABELS, ORACLE, ExplorationData, with_box
 from zsrm.data.shards import ShardFolder, save_json, save_npz
 from zsrm.grounding.gradcam import GradCAM
 from zsrm.grounding.labeler import OBJECT_WIDTH, SpatialLabeler, pixel_thresholds, world_table
-from zsrm.grounding.silhouette import Silhouette, calibrate, refine_points
+from zsrm.grounding.silhouette import Silhouette, calibrate, refine_points, region_width
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.lexicon import BOX
 from zsrm.tasks.relations import RELATIONS, TABLE_PLANE_CAMERAS, WORLD_THRESHOLDS, Thresholds
@@ -88,8 +88,12 @@ class Grounder:
     """Grad-CAM coordinates of every colour's phrase on every camera of a dataset's images."""
 
     def __init__(self, vlm, cfg: LabelConfig, data: ExplorationData, centres: list | None = None,
-                 fine_centres: list | None = None, box_vlm=None, silhouettes: dict | None = None):
+                 fine_centres: list | None = None, box_vlm=None, silhouettes: dict | None = None,
+                 box_min_width: float = 0.0):
         self.cfg, self.data = cfg, data
+        # On a table-plane camera, a box point whose silhouette is narrower than this (metres) sat
+        # on a block, not the box: the box goes unlocated there. 0: no check (zsrm label's way).
+        self.box_min_width = float(box_min_width)
         # Colours (an own scene's objects) the data can hold: each phrase contrasts with the others.
         self.allowed = [c for c in data.colours if c not in data.config["exclude"]]
         self.gradcam = {
@@ -182,6 +186,10 @@ class Grounder:
             sil = self.silhouettes.get("tabletop", {}).get(cam)  # only tabletop scenes hold the box
             if sil is not None:
                 xy[rows] = refine_points(images[rows], xy[rows], sil["box"])
+                if self.box_min_width:
+                    homography = self.data.table_homography["tabletop"][cam]
+                    narrow = [i for i in rows if region_width(images[i], xy[i], sil["box"], homography) < self.box_min_width]
+                    xy[narrow] = np.nan
         return {f"gradcam_box_xy_{cam}": xy, f"gradcam_box_score_{cam}": score, f"gradcam_box_peak_{cam}": peak,
                 f"gradcam_box_map_{cam}": maps}
 

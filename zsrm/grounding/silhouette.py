@@ -112,6 +112,24 @@ def refine_point(image: np.ndarray, seed, sil: Silhouette) -> np.ndarray:
     return np.array([cols.mean() - sil.offset[0], rows.mean() - sil.offset[1]])
 
 
+def region_width(image: np.ndarray, seed, sil: Silhouette, homography) -> float:
+    """The width along the table's x axis, in metres, of the region :func:`region` finds around
+    ``seed`` (its leftmost to rightmost pixel on its centroid's row, through the camera's table
+    ``homography``, :func:`zsrm.envs.cameras.table_homography`); 0 where no region is found.
+    Tells the box (10 cm) from a block (6 cm) a box point landed on."""
+    from zsrm.envs.cameras import apply_homography
+
+    seed = np.asarray(seed, np.float64)
+    if not np.isfinite(seed).all():
+        return 0.0
+    mask = region(image, seed, sil)
+    if not mask.any():
+        return 0.0
+    rows, cols = np.nonzero(mask)
+    left, right = apply_homography(homography, np.array([[cols.min() - 0.5, rows.mean()], [cols.max() + 0.5, rows.mean()]]))
+    return float(abs(right[0] - left[0]))
+
+
 def refine_points(images: np.ndarray, xy: np.ndarray, sil: Silhouette) -> np.ndarray:
     """:func:`refine_point` of every point: images (N, H, W, 3), xy (N, 2) or (N, P, 2)."""
     xy = np.asarray(xy, np.float64)
