@@ -117,37 +117,18 @@ def test_a_run_with_the_correction_reads_its_latest_model_on_resume(tmp_path):
         assert torch.equal(a, b)
 
 
-def drop_and_hover(env):
-    """Carry the goal's block away from the box, let it go on the table, then hover above it."""
-    base, steps = env.unwrapped, [0]
 
-    def act():
-        steps[0] += 1
-        box, block = base.object_positions()["box"], base.object_positions()["yellow"]
-        if steps[0] < 4:
-            return np.array([np.sign(block[0] - box[0]) or 1.0, 0.0, -0.3, 1.0])
-        return np.array([*np.clip((block + (0, 0, 0.2) - base.gripper_position) / 0.025, -1, 1), -1.0])
-    return act
+def test_the_box_width_check_stops_a_box_point_on_a_block_reading_inside_of(tmp_path, monkeypatch):
+    import json
 
+    from test_distill import run_probe
 
-def test_the_box_width_check_stops_a_box_point_on_a_block_reading_inside_of(tmp_path):
-    from zsrm.envs.rollout import episode_steps, make_env
-    from zsrm.envs.scripted import scripted_controller
-    from zsrm.rl.corrected import goal_labeler
-
-    cfg = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000, zsrm_correct_box_width=0.085)
-    env = make_env("a yellow block inside of a box", cameras=("tilted",), image_size=cfg.image_size)
-    runs = {}  # a layout (seed 903) where the box's Grad-CAM point lands on the block resting 0.2 m from the box
-    for name, policy, seed in (("dropped", drop_and_hover, 903), ("scripted", scripted_controller, 0)):
-        steps = list(episode_steps(env, policy, seed=seed))[5::3]
-        runs[name] = np.stack([obs["tilted"] for _, obs, _, _ in steps]), np.array([i["is_success"] for _, _, i, _ in steps])
-    env.close()
-    labeler = goal_labeler(cfg, tmp_path)
-    assert labeler.grounder.box_min_width == 0.085
-    checked = {name: labeler(frames) for name, (frames, _) in runs.items()}
-    labeler.grounder.box_min_width = 0.0  # the labeler as zsrm label's
-    unchecked = {name: labeler(frames) for name, (frames, _) in runs.items()}
-    assert not runs["dropped"][1].any() and unchecked["dropped"].mean() > 0.5 and checked["dropped"].mean() < 0.1
-    goal = runs["scripted"][1]
-    assert goal.sum() >= 5 and checked["scripted"][goal].mean() >= 0.7
-    np.testing.assert_array_equal(checked["scripted"][goal], unchecked["scripted"][goal])  # no goal frame lost
+    # seed 903: the box's Grad-CAM point lands on the block resting 0.2 m from the box
+    run_probe("box_width_check.py", monkeypatch, "--kinds", "hover", "--seeds", "903", "--scripted-episodes", "1",
+              "--every", "3", "--calibration", str(tmp_path / "calib"), "--out", str(tmp_path / "check.json"))
+    out = json.loads((tmp_path / "check.json").read_text())
+    hover, scripted = out["hover"], out["scripted"]
+    assert hover["oracle_goal"] == 0 and hover["unchecked"]["false_goal"] > 0.5 * hover["frames"]
+    assert hover["checked"]["false_goal"] < 0.1 * hover["frames"]
+    assert scripted["oracle_goal"] >= 5 and scripted["checked"]["recall"] >= 0.7
+    assert scripted["checked"]["recall"] == scripted["unchecked"]["recall"]  # no goal frame lost
