@@ -64,14 +64,14 @@ def test_the_correction_is_a_zsrm_setting_written_only_when_on():
     on = TrainConfig(goal="place_between", reward="zsrm", zsrm_correct_every=5000)
     assert on.to_dict()["zsrm_correct_every"] == 5000 and on.zsrm_correct_frames == 128
     off = TrainConfig(goal="place_between", reward="zsrm").to_dict()
-    assert not {"zsrm_correct_every", "zsrm_correct_frames", "zsrm_correct_box_width"} & set(off)  # committed runs match
-    assert "zsrm_correct_box_width" not in on.to_dict()  # 0: the labeler as zsrm label's
+    assert not {"zsrm_correct_every", "zsrm_correct_frames", "zsrm_correct_box_area"} & set(off)  # committed runs match
+    assert "zsrm_correct_box_area" not in on.to_dict()  # 0: the labeler as zsrm label's
     # a sweep's shared setting: the other rewards' runs are the same runs whatever it says
     assert TrainConfig(goal="stack", reward="oracle", zsrm_correct_every=5000,
-                       zsrm_correct_box_width=0.085) == TrainConfig(goal="stack", reward="oracle")
-    assert TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_box_width=0.085) == TrainConfig(
+                       zsrm_correct_box_area=0.0115) == TrainConfig(goal="stack", reward="oracle")
+    assert TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_box_area=0.0115) == TrainConfig(
         goal="place_inside", reward="zsrm")  # read only by the correction
-    for bad in ({"zsrm_correct_every": -1}, {"zsrm_correct_box_width": -0.1}):
+    for bad in ({"zsrm_correct_every": -1}, {"zsrm_correct_box_area": -0.1}):
         with pytest.raises(ValueError, match="must be >= 0"):
             TrainConfig(goal="stack", reward="zsrm", **bad)
     with pytest.raises(ValueError, match="no calibrated goal labeler"):
@@ -118,13 +118,13 @@ def test_a_run_with_the_correction_reads_its_latest_model_on_resume(tmp_path):
 
 
 
-def test_the_box_width_check_stops_a_box_point_on_a_block_reading_inside_of(tmp_path, monkeypatch):
+def test_the_box_area_check_stops_a_box_point_on_a_block_reading_inside_of(tmp_path, monkeypatch):
     import json
 
     from test_distill import run_probe
 
     # seed 903: the box's Grad-CAM point lands on the block resting 0.2 m from the box
-    run_probe("box_width_check.py", monkeypatch, "--kinds", "hover", "--seeds", "903", "--scripted-episodes", "1",
+    run_probe("box_area_check.py", monkeypatch, "--kinds", "hover", "--seeds", "903", "--scripted-episodes", "1",
               "--every", "3", "--calibration", str(tmp_path / "calib"), "--out", str(tmp_path / "check.json"))
     out = json.loads((tmp_path / "check.json").read_text())
     hover, scripted = out["hover"], out["scripted"]

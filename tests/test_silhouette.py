@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from zsrm.grounding.silhouette import Silhouette, calibrate, refine_point, refine_points, region_width
+from zsrm.grounding.silhouette import Silhouette, calibrate, refine_point, refine_points, region_area
 
 TABLE = (222, 191, 154)  # the tabletop's colour
 RED, GREEN, WHITE = (200, 30, 30), (30, 180, 40), (240, 240, 240)
@@ -57,15 +57,17 @@ def test_the_box_keeps_the_block_it_holds():
     np.testing.assert_allclose(xy, [11.5, 11.5])
 
 
-def test_region_width_tells_the_box_from_a_block_in_table_metres():
-    # 1 cm a pixel: a 10-pixel white box with a block in it is 0.10 m wide, a lone 6-pixel block 0.06
+def test_region_area_tells_the_box_from_a_block_in_square_metres():
+    # 1 cm a pixel: a 10 x 8 pixel white box with a block in it covers 0.008 m2, a lone 6 x 6 block 0.0036
     per_cm = np.diag([0.01, 0.01, 1.0])
     sil = Silhouette(half_window=12, by_colour=False)
     boxed = scene((WHITE, 6, 6, 16, 14), (RED, 9, 8, 13, 12))
-    assert region_width(boxed, (11.0, 10.0), sil, per_cm) == pytest.approx(0.10)
-    assert region_width(scene((RED, 20, 8, 26, 14)), (23.0, 11.0), sil, per_cm) == pytest.approx(0.06)
-    assert region_width(scene(), (9.0, 9.0), sil, per_cm) == 0.0  # bare table
-    assert region_width(boxed, (np.nan, np.nan), sil, per_cm) == 0.0
+    assert region_area(boxed, (11.0, 10.0), sil, per_cm) == pytest.approx(0.008)
+    assert region_area(scene((RED, 20, 8, 26, 14)), (23.0, 11.0), sil, per_cm) == pytest.approx(0.0036)
+    assert region_area(scene(), (9.0, 9.0), sil, per_cm) == 0.0  # bare table
+    assert region_area(boxed, (np.nan, np.nan), sil, per_cm) == 0.0
+    # farther from the camera (a homography that shrinks pixels by half) the same pixels cover a quarter
+    assert region_area(boxed, (11.0, 10.0), sil, np.diag([0.01, 0.01, 2.0])) == pytest.approx(0.002)
 
 
 def test_refine_points_keeps_shapes_and_nan():

@@ -40,7 +40,7 @@ from zsrm.data.dataset import LABELS, ORACLE, ExplorationData, with_box
 from zsrm.data.shards import ShardFolder, save_json, save_npz
 from zsrm.grounding.gradcam import GradCAM
 from zsrm.grounding.labeler import OBJECT_WIDTH, SpatialLabeler, pixel_thresholds, world_table
-from zsrm.grounding.silhouette import Silhouette, calibrate, refine_points, region_width
+from zsrm.grounding.silhouette import Silhouette, calibrate, refine_points, region_area
 from zsrm.tasks.catalogue import SCENE_SHAPES
 from zsrm.tasks.lexicon import BOX
 from zsrm.tasks.relations import RELATIONS, TABLE_PLANE_CAMERAS, WORLD_THRESHOLDS, Thresholds
@@ -89,11 +89,12 @@ class Grounder:
 
     def __init__(self, vlm, cfg: LabelConfig, data: ExplorationData, centres: list | None = None,
                  fine_centres: list | None = None, box_vlm=None, silhouettes: dict | None = None,
-                 box_min_width: float = 0.0):
+                 box_min_area: float = 0.0):
         self.cfg, self.data = cfg, data
-        # On a table-plane camera, a box point whose silhouette is narrower than this (metres) sat
-        # on a block, not the box: the box goes unlocated there. 0: no check (zsrm label's way).
-        self.box_min_width = float(box_min_width)
+        # On a table-plane camera, a box point whose silhouette covers less of the table than this
+        # (square metres) sat on a block, not the box: the box goes unlocated there. 0: no check
+        # (zsrm label's way).
+        self.box_min_area = float(box_min_area)
         # Colours (an own scene's objects) the data can hold: each phrase contrasts with the others.
         self.allowed = [c for c in data.colours if c not in data.config["exclude"]]
         self.gradcam = {
@@ -186,10 +187,10 @@ class Grounder:
             sil = self.silhouettes.get("tabletop", {}).get(cam)  # only tabletop scenes hold the box
             if sil is not None:
                 xy[rows] = refine_points(images[rows], xy[rows], sil["box"])
-                if self.box_min_width:
+                if self.box_min_area:
                     homography = self.data.table_homography["tabletop"][cam]
-                    narrow = [i for i in rows if region_width(images[i], xy[i], sil["box"], homography) < self.box_min_width]
-                    xy[narrow] = np.nan
+                    small = [i for i in rows if region_area(images[i], xy[i], sil["box"], homography) < self.box_min_area]
+                    xy[small] = np.nan
         return {f"gradcam_box_xy_{cam}": xy, f"gradcam_box_score_{cam}": score, f"gradcam_box_peak_{cam}": peak,
                 f"gradcam_box_map_{cam}": maps}
 

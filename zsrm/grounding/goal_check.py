@@ -42,10 +42,10 @@ class GoalLabeler:
 
     @classmethod
     def calibrated(cls, task: Task, scene: str, image_size: int, folder: str | Path, vlm, vlm_spec: str = "scene",
-                   box_vlm=None, box_min_width: float = 0.0) -> "GoalLabeler":
+                   box_vlm=None, box_min_area: float = 0.0) -> "GoalLabeler":
         """Calibrated on ``CALIBRATION_IMAGES`` exploration renders of ``scene`` (a zsrm scene name:
-        tabletop or pushing) at ``image_size``, collected into ``folder`` (once). ``box_min_width``:
-        a box point whose silhouette is narrower (metres on the table) is not the box (see
+        tabletop or pushing) at ``image_size``, collected into ``folder`` (once). ``box_min_area``:
+        a box point whose silhouette covers less of the table (square metres) is not the box (see
         :class:`~zsrm.grounding.annotate.Grounder`)."""
         if scene not in SCENE_IDS:
             raise ValueError(f"unknown scene {scene!r}; the goal labeler reads zsrm's scenes: {', '.join(SCENE_IDS)}")
@@ -55,7 +55,7 @@ class GoalLabeler:
                                      cameras=(camera,), image_size=image_size, p_box=0.5 if has_box else 0.0),
                        folder, progress=False)
         cfg = LabelConfig(vlm=vlm_spec)
-        grounder = Grounder(vlm, cfg, data, box_vlm=box_vlm, box_min_width=box_min_width)
+        grounder = Grounder(vlm, cfg, data, box_vlm=box_vlm, box_min_area=box_min_area)
         return cls(task, grounder, labelers(data, cfg, relations=(task.relation,))[scene])
 
     def __call__(self, frames: np.ndarray) -> np.ndarray:

@@ -116,10 +116,11 @@ class TrainConfig:
     0: the reward model stays as loaded"""
     zsrm_correct_frames: int = 128
     """--reward zsrm with zsrm_correct_every: frames labelled per update"""
-    zsrm_correct_box_width: float = 0.0
+    zsrm_correct_box_area: float = 0.0
     """--reward zsrm with zsrm_correct_every, goals with the box: the labeler's box point whose
-    silhouette is narrower than this on the table (metres; the box is 0.10 wide, a block 0.06) sat on
-    a block and is dropped, so inside of does not hold there; 0: no check (the labeler as zsrm label's)"""
+    silhouette covers less of the table than this (square metres; the box alone 0.013-0.016 on the
+    tilted camera, a block 0.007-0.010) sat on a block and is dropped, so inside of does not hold
+    there; 0: no check (the labeler as zsrm label's)"""
     vice_update_every: int = 4000
     """--reward vice: every this many env steps the goal classifier takes 50 Adam steps on the
     policy's latest frames beside the frames it was fitted on, as Fu et al. (2018) train VICE
@@ -145,7 +146,7 @@ class TrainConfig:
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
              "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0,
              "near_start": 0.0, "zsrm_correct_every": 0, "zsrm_correct_frames": 128,
-             "zsrm_correct_box_width": 0.0}
+             "zsrm_correct_box_area": 0.0}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
@@ -169,10 +170,10 @@ class TrainConfig:
             check_near_start(self.near_start)
         if self.lift_ceiling < 0:
             raise ValueError(f"lift_ceiling must be >= 0 (0: the workspace's top), got {self.lift_ceiling}")
-        if self.zsrm_correct_every < 0 or self.zsrm_correct_frames < 1 or self.zsrm_correct_box_width < 0:
-            raise ValueError(f"zsrm_correct_every and zsrm_correct_box_width must be >= 0 (0: off) and "
+        if self.zsrm_correct_every < 0 or self.zsrm_correct_frames < 1 or self.zsrm_correct_box_area < 0:
+            raise ValueError(f"zsrm_correct_every and zsrm_correct_box_area must be >= 0 (0: off) and "
                              f"zsrm_correct_frames >= 1, got {self.zsrm_correct_every}, "
-                             f"{self.zsrm_correct_box_width} and {self.zsrm_correct_frames}")
+                             f"{self.zsrm_correct_box_area} and {self.zsrm_correct_frames}")
         if self.vice_update_every < 0:
             raise ValueError(f"vice_update_every must be >= 0 (0: a fixed classifier), got {self.vice_update_every}")
         if self.target_kl < 0:
@@ -214,7 +215,7 @@ class TrainConfig:
         if self.reward != "zsrm" or not self.zsrm_correct_every:  # only the zsrm reward is corrected
             self.zsrm_correct_every = self.ADDED["zsrm_correct_every"]
             self.zsrm_correct_frames = self.ADDED["zsrm_correct_frames"]
-            self.zsrm_correct_box_width = self.ADDED["zsrm_correct_box_width"]
+            self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
         if self.reward != "vice":  # the same for VICE's classifier updates
             self.vice_update_every = self.ADDED["vice_update_every"]
             self.vice_oracle_labels = self.ADDED["vice_oracle_labels"]

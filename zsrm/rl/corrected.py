@@ -28,7 +28,7 @@ def goal_labeler(cfg: TrainConfig, folder: str | Path) -> GoalLabeler:
     scene = next(name for name, env_id in SCENE_IDS.items() if env_id == entry.env_id)
     box_vlm = load_vlm(BOX_VLM) if cfg.vlm == DEFAULT_VLM and BOX in entry.task.objects else None
     return GoalLabeler.calibrated(entry.task, scene, cfg.image_size, folder, load_vlm(cfg.vlm), vlm_spec=cfg.vlm,
-                                  box_vlm=box_vlm, box_min_width=cfg.zsrm_correct_box_width)
+                                  box_vlm=box_vlm, box_min_area=cfg.zsrm_correct_box_area)
 
 
 def corrected_reward(cfg: TrainConfig, out: str | Path) -> CorrectedZSRMReward:

@@ -1,4 +1,4 @@
-"""Does the goal labeler's box check (``--zsrm-correct-box-width``) stop "inside of" where the
+"""Does the goal labeler's box check (``--zsrm-correct-box-area``) stop "inside of" where the
 box's Grad-CAM point lands on a block resting away from the box, and keep the true goal frames?
 
 Plays place_inside's scene with scripted motions that carry the yellow block away from the box and
@@ -7,7 +7,7 @@ let it go on the table, then move the gripper toward the box (``box``), hover ab
 every frame of the tilted camera with the goal labeler without and with the check. The oracle's
 verdict is only compared with, never read by the labeler.
 
-    python probes/box_width_check.py --out results/side/grounding/box_width_check.json
+    python probes/box_area_check.py --out results/side/grounding/box_area_check.json
 """
 from __future__ import annotations
 
@@ -52,8 +52,8 @@ def episode_frames(env, policy, seeds, skip: int = 5, every: int = 1):
     return np.stack(frames), np.array(oracle)
 
 
-def check(width: float, seeds, kinds, scripted_episodes: int, every: int, folder: str) -> dict:
-    cfg = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=10000, zsrm_correct_box_width=width)
+def check(area: float, seeds, kinds, scripted_episodes: int, every: int, folder: str) -> dict:
+    cfg = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=10000, zsrm_correct_box_area=area)
     env = make_env(GOAL, cameras=("tilted",), image_size=cfg.image_size)
     runs = {kind: episode_frames(env, away_from_box(kind), seeds, every=every) for kind in kinds}
     runs["scripted"] = episode_frames(env, scripted_controller, range(scripted_episodes), every=every)
@@ -61,9 +61,9 @@ def check(width: float, seeds, kinds, scripted_episodes: int, every: int, folder
     labeler = goal_labeler(cfg, folder)
     out = {}
     for name, (frames, oracle) in runs.items():
-        labeler.grounder.box_min_width = width
+        labeler.grounder.box_min_area = area
         checked = labeler(frames)
-        labeler.grounder.box_min_width = 0.0  # the labeler as zsrm label's
+        labeler.grounder.box_min_area = 0.0  # the labeler as zsrm label's
         unchecked = labeler(frames)
         row = {"frames": len(frames), "oracle_goal": int(oracle.sum())}
         for key, said in (("unchecked", unchecked), ("checked", checked)):
@@ -75,17 +75,17 @@ def check(width: float, seeds, kinds, scripted_episodes: int, every: int, folder
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--width", type=float, default=0.085, help="the check's box width (metres)")
+    parser.add_argument("--area", type=float, default=0.0115, help="the check's least box area (square metres)")
     parser.add_argument("--seeds", type=int, nargs="+", default=list(range(900, 906)), help="episodes per motion")
     parser.add_argument("--kinds", nargs="+", default=list(KINDS), choices=KINDS)
     parser.add_argument("--scripted-episodes", type=int, default=6)
     parser.add_argument("--every", type=int, default=1, help="keep every n-th frame")
-    parser.add_argument("--calibration", default="runs/box_width_check", help="the labeler's calibration renders")
-    parser.add_argument("--out", default="results/side/grounding/box_width_check.json")
+    parser.add_argument("--calibration", default="runs/box_area_check", help="the labeler's calibration renders")
+    parser.add_argument("--out", default="results/side/grounding/box_area_check.json")
     args = parser.parse_args()
-    out = check(args.width, args.seeds, args.kinds, args.scripted_episodes, args.every, args.calibration)
-    out["meta"] = {"width_m": args.width, "goal": GOAL, "camera": "tilted",
-                   "command": f"python probes/box_width_check.py --width {args.width} --seeds "
+    out = check(args.area, args.seeds, args.kinds, args.scripted_episodes, args.every, args.calibration)
+    out["meta"] = {"area_m2": args.area, "goal": GOAL, "camera": "tilted",
+                   "command": f"python probes/box_area_check.py --area {args.area} --seeds "
                               f"{' '.join(map(str, args.seeds))} --kinds {' '.join(args.kinds)} --scripted-episodes "
                               f"{args.scripted_episodes} --every {args.every} --out {args.out}"}
     write_json(args.out, out)
