@@ -341,6 +341,10 @@ SIDE = [
     ("side/rl/reward_hacking_place_inside_corrected.json", "a place_inside zsrm policy trained with the corrected "
      "reward (--zsrm-correct-every 5000 --gamma 0.99, seed 0; scored 0): the block rests 0.18 m from the box, the "
      "goal labeler says inside of in 0.29 of decisions, the oracle in none (probes/reward_hacking.py --labeler)"),
+    ("side/grounding/box_area_check.json", "the goal labeler on place_inside frames where the yellow block rests "
+     "away from the box (3 motions x 6 episodes): inside of said in 368 of 1728 without the box check (the box's "
+     "Grad-CAM point on the block), 4 with it (--zsrm-correct-box-area 0.0115); the scripted goal frames' recall "
+     "0.94 both ways (probes/box_area_check.py)"),
     ("side/rl/push_close_ends.json", "a push_close oracle policy (500k, seed 0) by start side, and its 20 of 30 "
      "episodes that never succeed: the pucks end 14.5 cm apart (close to: under 10), the nearest 14.3: the push "
      "stops short (probes/push_sides.py)"),
