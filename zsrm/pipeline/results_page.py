@@ -345,6 +345,10 @@ SIDE = [
      "away from the box (3 motions x 6 episodes): inside of said in 368 of 1728 without the box check (the box's "
      "Grad-CAM point on the block), 4 with it (--zsrm-correct-box-area 0.0115); the scripted goal frames' recall "
      "0.94 both ways (probes/box_area_check.py)"),
+    ("side/rl/reward_hacking_place_inside_box_area.json", "a place_inside zsrm policy trained with the box check "
+     "(--zsrm-correct-every 10000 --zsrm-correct-box-area 0.0115 --gamma 0.99, seed 1; scored 19.7): the reward pays "
+     "in 0.72 of decisions, the oracle in 0.21; the block held 8 cm up over the box, which the goal labeler on the "
+     "tilted camera calls inside of in 0.57 of those frames (height and depth look alike there)"),
     ("side/rl/push_close_ends.json", "a push_close oracle policy (500k, seed 0) by start side, and its 20 of 30 "
      "episodes that never succeed: the pucks end 14.5 cm apart (close to: under 10), the nearest 14.3: the push "
      "stops short (probes/push_sides.py)"),
