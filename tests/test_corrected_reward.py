@@ -111,10 +111,12 @@ def test_a_run_with_the_correction_reads_its_latest_model_on_resume(tmp_path):
     with torch.no_grad():
         for p in reward.model.parameters():
             p.add_(0.01)
-    reward.model.save(tmp_path / "zsrm_online")
+    reward.updates, reward.labelled, reward.labelled_goal = 3, 384, 100
+    reward.on_update(reward.model)  # what an update keeps: the model and the counts
     resumed = make_reward(cfg, tmp_path)
     for a, b in zip(reward.model.parameters(), resumed.model.parameters()):
         assert torch.equal(a, b)
+    assert (resumed.updates, resumed.labelled, resumed.labelled_goal) == (3, 384, 100)  # counted on
 
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from zsrm.common.files import write_json
+from zsrm.common.files import read_json, write_json
 from zsrm.fullmodel import load_reward_backbone
 from zsrm.grounding.annotate import BOX_VLM, DEFAULT_VLM
 from zsrm.grounding.goal_check import GoalLabeler
@@ -40,8 +40,11 @@ def corrected_reward(cfg: TrainConfig, out: str | Path) -> CorrectedZSRMReward:
     model = load_reward_backbone(latest if (latest / "config.json").is_file() else cfg.reward_model)
     reward = CorrectedZSRMReward(model, labeler, update_every=max(1, cfg.zsrm_correct_every // cfg.action_repeat),
                                  label_frames=cfg.zsrm_correct_frames, seed=cfg.seed, output=cfg.zsrm_output)
+    if (latest / "corrections.json").is_file():  # a resumed run counts on from what it had done
+        done = read_json(latest / "corrections.json", "the corrected reward's counts")
+        reward.updates, reward.labelled, reward.labelled_goal = done["updates"], done["labelled"], done["labelled_goal"]
 
-    def keep(model) -> None:  # the latest model, and what the labeler said so far (since the last resume)
+    def keep(model) -> None:  # the latest model, and what the labeler said so far
         model.save(latest)
         write_json(latest / "corrections.json", {"updates": reward.updates, "labelled": reward.labelled,
                                                  "labelled_goal": reward.labelled_goal})
