@@ -71,6 +71,10 @@ def test_the_correction_is_a_zsrm_setting_written_only_when_on():
                        zsrm_correct_box_area=0.0115) == TrainConfig(goal="stack", reward="oracle")
     assert TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_box_area=0.0115) == TrainConfig(
         goal="place_inside", reward="zsrm")  # read only by the correction
+    boxless = TrainConfig(goal="stack", reward="zsrm", zsrm_correct_every=5000, zsrm_correct_box_area=0.0115)
+    assert boxless == TrainConfig(goal="stack", reward="zsrm", zsrm_correct_every=5000)  # and for goals with the box
+    assert TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000,
+                       zsrm_correct_box_area=0.0115).to_dict()["zsrm_correct_box_area"] == 0.0115
     for bad in ({"zsrm_correct_every": -1}, {"zsrm_correct_box_area": -0.1}):
         with pytest.raises(ValueError, match="must be >= 0"):
             TrainConfig(goal="stack", reward="zsrm", **bad)

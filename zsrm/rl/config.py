@@ -216,6 +216,8 @@ class TrainConfig:
             self.zsrm_correct_every = self.ADDED["zsrm_correct_every"]
             self.zsrm_correct_frames = self.ADDED["zsrm_correct_frames"]
             self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
+        if self.zsrm_correct_box_area and not goal_has_box(self.goal, self.scene):  # only the box is checked
+            self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
         if self.reward != "vice":  # the same for VICE's classifier updates
             self.vice_update_every = self.ADDED["vice_update_every"]
             self.vice_oracle_labels = self.ADDED["vice_oracle_labels"]
@@ -285,6 +287,15 @@ def check_scene_run(cfg: TrainConfig) -> None:
     if cfg.start not in ("auto", "above"):
         raise ValueError(f"start {cfg.start!r} is for the tabletop's blocks; your own scene starts as its env does")
     cfg.start = "above"  # the default: nothing to record
+
+
+def goal_has_box(goal: str, scene: str | None = None) -> bool:
+    """Does a catalogue task or goal sentence of zsrm's scenes name the box? (Own scenes: no.)"""
+    from zsrm.tasks.catalogue import resolve
+    from zsrm.tasks.lexicon import CONTAINERS
+
+    task = None if scene else resolve(goal).task
+    return task is not None and any(o in CONTAINERS for o in task.objects)
 
 
 def goal_relation(goal: str, scene: str | None = None) -> str | None:
