@@ -222,6 +222,9 @@ FIGURES = [
     Figure("Learning from pixels, v3 with the zsrm reward corrected every 10000 env steps (--zsrm-correct-every "
            "10000; inside of left out, where the labeler is fooled): final success rate, 300k env steps, 3 seeds",
            "rl/correct10k/learning.json", _nine, _recorded_command, headline=False),
+    Figure("Learning from pixels, v3 with the zsrm reward corrected every 10000 env steps at 500k env steps (in "
+           "between, in front of): final success rate, 3 seeds", "rl/correct10k-500k/learning.json", _nine,
+           _recorded_command, headline=False),
     Figure("Learning from pixels, the v2 learner (the default until 2026-12-06), final oracle episode reward",
            "rl/v2/learning.json", _learning, _recorded_command),
     Figure("Table 2 in colour frames (the paper's setting): the paper's three, behaviour cloning",
