@@ -72,7 +72,7 @@ def test_the_correction_is_a_zsrm_setting_written_only_when_on():
     assert TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_box_area=0.0115) == TrainConfig(
         goal="place_inside", reward="zsrm")  # read only by the correction
     boxless = TrainConfig(goal="stack", reward="zsrm", zsrm_correct_every=5000, zsrm_correct_box_area=0.0115)
-    assert boxless == TrainConfig(goal="stack", reward="zsrm", zsrm_correct_every=5000)  # and for goals with the box
+    assert boxless == TrainConfig(goal="stack", reward="zsrm", zsrm_correct_every=5000)  # nor for goals without the box
     assert TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000,
                        zsrm_correct_box_area=0.0115).to_dict()["zsrm_correct_box_area"] == 0.0115
     for bad in ({"zsrm_correct_every": -1}, {"zsrm_correct_box_area": -0.1}):
@@ -121,7 +121,6 @@ def test_a_run_with_the_correction_reads_its_latest_model_on_resume(tmp_path):
     for a, b in zip(reward.model.parameters(), resumed.model.parameters()):
         assert torch.equal(a, b)
     assert (resumed.updates, resumed.labelled, resumed.labelled_goal) == (3, 384, 100)  # counted on
-
 
 
 def test_the_box_area_check_stops_a_box_point_on_a_block_reading_inside_of(tmp_path, monkeypatch):

@@ -38,6 +38,7 @@ def test_task_text_and_phrases():
     task = Task("right_of", ("yellow", "red"))
     assert task.text == "a yellow block on the right of a red block"
     assert task.phrases == ("yellow block", "red block")
+    assert not task.has_container and Task("inside_of", ("yellow", "box")).has_container
     assert Task("close_to", ("blue", "yellow"), "puck").scene == "pushing"
     assert Task.from_text(task.text) == task
 

@@ -19,7 +19,6 @@ from zsrm.grounding.annotate import Grounder, LabelConfig, gradcam_objects, labe
 from zsrm.grounding.labeler import SpatialLabeler
 from zsrm.tasks.catalogue import SCENE_IDS
 from zsrm.tasks.language import Task
-from zsrm.tasks.lexicon import CONTAINERS
 from zsrm.tasks.relations import RELATIONS
 
 CALIBRATION_IMAGES = 16  # exploration renders the labeler is calibrated on (zsrm label: a dataset's first 8)
@@ -50,10 +49,9 @@ class GoalLabeler:
         if scene not in SCENE_IDS:
             raise ValueError(f"unknown scene {scene!r}; the goal labeler reads zsrm's scenes: {', '.join(SCENE_IDS)}")
         camera = RELATIONS[task.relation].camera
-        has_box = any(o in CONTAINERS for o in task.objects)
+        p_box = 0.5 if task.has_container else 0.0
         data = collect(CollectConfig(images=CALIBRATION_IMAGES, shard_size=CALIBRATION_IMAGES, scenes=(scene,),
-                                     cameras=(camera,), image_size=image_size, p_box=0.5 if has_box else 0.0),
-                       folder, progress=False)
+                                     cameras=(camera,), image_size=image_size, p_box=p_box), folder, progress=False)
         cfg = LabelConfig(vlm=vlm_spec)
         grounder = Grounder(vlm, cfg, data, box_vlm=box_vlm, box_min_area=box_min_area)
         return cls(task, grounder, labelers(data, cfg, relations=(task.relation,))[scene])

@@ -292,10 +292,9 @@ def check_scene_run(cfg: TrainConfig) -> None:
 def goal_has_box(goal: str, scene: str | None = None) -> bool:
     """Does a catalogue task or goal sentence of zsrm's scenes name the box? (Own scenes: no.)"""
     from zsrm.tasks.catalogue import resolve
-    from zsrm.tasks.lexicon import CONTAINERS
 
     task = None if scene else resolve(goal).task
-    return task is not None and any(o in CONTAINERS for o in task.objects)
+    return task is not None and task.has_container
 
 
 def goal_relation(goal: str, scene: str | None = None) -> str | None:

@@ -86,6 +86,11 @@ class Task:
         """Noun phrases of the objects, as Grad-CAM reads them ("red block")."""
         return tuple(c if c in CONTAINERS else f"{c} {self.shape}" for c in self.objects)
 
+    @property
+    def has_container(self) -> bool:
+        """Does the goal name a container (the box)?"""
+        return any(c in CONTAINERS for c in self.objects)
+
     def mirrored(self) -> "Task":
         """The goal of the scene mirrored left to right in its camera ("left of" <-> "right of");
         a ValueError for a relation whose camera's image does not simply flip."""
