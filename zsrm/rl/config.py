@@ -52,6 +52,10 @@ class TrainConfig:
     """spatial-softmax keypoints the policy reads from the VLM feature map"""
     pixels: bool = True
     """also a small CNN on the raw frame, trained by RL (sees the gripper, which the VLM hardly does)"""
+    pair_scale: float = 0.0
+    """also give the policy every pair of keypoints' difference (x_j - x_i, y_j - y_i) times this (the
+    frame spans 2: 3 makes a unit about 10 cm of the table); where one thing is from another at a fine
+    scale, what PPO on true state needed to learn push_close (docs/training.md); 0: off"""
     aux_inverse: bool = True
     """train the keypoints with a self-supervised inverse-dynamics loss too (they learn where the agent is)"""
     augment_shift: int = 0
@@ -146,7 +150,7 @@ class TrainConfig:
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
              "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0,
              "near_start": 0.0, "zsrm_correct_every": 0, "zsrm_correct_frames": 128,
-             "zsrm_correct_box_area": 0.0}
+             "zsrm_correct_box_area": 0.0, "pair_scale": 0.0}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
@@ -168,6 +172,8 @@ class TrainConfig:
             from zsrm.envs.pushing import check_near_start
 
             check_near_start(self.near_start)
+        if self.pair_scale < 0:
+            raise ValueError(f"pair_scale must be >= 0 (0: no keypoint pairs), got {self.pair_scale}")
         if self.lift_ceiling < 0:
             raise ValueError(f"lift_ceiling must be >= 0 (0: the workspace's top), got {self.lift_ceiling}")
         if self.zsrm_correct_every < 0 or self.zsrm_correct_frames < 1 or self.zsrm_correct_box_area < 0:
@@ -218,6 +224,8 @@ class TrainConfig:
             self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
         if self.zsrm_correct_box_area and not goal_has_box(self.goal, self.scene):  # only the box is checked
             self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
+        if self.reward == "random":  # uniform random actions: no policy network reads its inputs
+            self.pair_scale = self.ADDED["pair_scale"]
         if self.reward != "vice":  # the same for VICE's classifier updates
             self.vice_update_every = self.ADDED["vice_update_every"]
             self.vice_oracle_labels = self.ADDED["vice_oracle_labels"]

@@ -156,17 +156,24 @@ class PixelKeypoints(nn.Module):
 
 class KeypointExtractor(BaseFeaturesExtractor):
     """VLM feature map -> 1x1 convs -> K keypoints (x, y, strength), with the pixel CNN's
-    keypoints beside them (``pixels``), -> a linear layer."""
+    keypoints beside them (``pixels``), -> a linear layer. ``pair_scale`` > 0 adds every pair of
+    keypoints' difference (x_j - x_i, y_j - y_i) times ``pair_scale``: where one thing is from
+    another, at a finer scale than the frame's [-1, 1]. PPO on true state learnt push_close from
+    the puck's place relative to the pusher in units of 10 cm, not from absolute places, nor from
+    relative ones in the table's units (``probes/push_state_ppo.py``)."""
 
     def __init__(self, observation_space: gym.spaces.Dict, keypoints: int = 32, features_dim: int = 256,
-                 pixels: bool = True):
+                 pixels: bool = True, pair_scale: float = 0.0):
         super().__init__(observation_space, features_dim)
         c, h, w = observation_space[FEATURES_KEY].shape
         self.heat = nn.Sequential(nn.Conv2d(c, 64, 1), nn.ReLU(), nn.Conv2d(64, keypoints, 1))
         self.softmax = SpatialSoftmax(h, w)
         self.pixels = PixelKeypoints(observation_space[IMAGE_KEY].shape[-1]) if pixels else None
-        width = 3 * keypoints + (self.pixels.out_dim if pixels else 0)
-        self.out = nn.Sequential(nn.Linear(width, features_dim), nn.ReLU())
+        self.pair_scale = float(pair_scale)
+        count = keypoints + (self.pixels.out_dim // 3 if pixels else 0)
+        self.points_dim = 3 * count  # what points() gives (the inverse-dynamics head reads it)
+        self.out = nn.Sequential(nn.Linear(self.points_dim + (count * (count - 1) if pair_scale else 0), features_dim),
+                                 nn.ReLU())
 
     def heat_maps(self, maps: torch.Tensor) -> torch.Tensor:
         """``self.heat`` (two 1x1 convs) as matrix products over channels-last cells: the same
@@ -183,4 +190,28 @@ class KeypointExtractor(BaseFeaturesExtractor):
         return points
 
     def forward(self, observations: dict) -> torch.Tensor:
-        return self.out(self.points(observations))
+        points = self.points(observations)
+        if self.pair_scale:
+            points = torch.cat([points, self.pair_scale * pair_differences(keypoint_xy(points, self.pixels))], dim=1)
+        return self.out(points)
+
+
+def keypoint_xy(points: torch.Tensor, pixels: PixelKeypoints | None) -> torch.Tensor:
+    """``(N, M, 2)``: the (x, y) of every keypoint in :meth:`KeypointExtractor.points`' output, whose
+    branches each hold their K points' (x, y) pairs, then their K strengths."""
+    n = pixels.out_dim // 3 if pixels is not None else 0
+    vlm = points[:, :points.shape[1] - 3 * n]
+    xy = [vlm[:, :2 * (vlm.shape[1] // 3)]]
+    if n:
+        xy.append(points[:, -3 * n:-n])
+    return torch.cat(xy, dim=1).reshape(len(points), -1, 2)
+
+
+def pair_differences(xy: torch.Tensor) -> torch.Tensor:
+    """``(N, M, 2)`` points -> ``(N, M (M - 1))``: ``xy[j] - xy[i]`` for every pair i < j.
+
+    >>> pair_differences(torch.tensor([[[0., 0.], [1., 2.], [3., 3.]]]))
+    tensor([[1., 2., 3., 3., 2., 1.]])
+    """
+    i, j = torch.triu_indices(xy.shape[1], xy.shape[1], offset=1)
+    return (xy[:, j] - xy[:, i]).flatten(1)

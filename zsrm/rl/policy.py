@@ -27,7 +27,7 @@ KIND = "zsrm-policy"
 
 def policy_kwargs(cfg: TrainConfig) -> dict:
     return dict(features_extractor_class=KeypointExtractor,
-                features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels),
+                features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels, pair_scale=cfg.pair_scale),
                 net_arch=dict(pi=[256], vf=[256]), normalize_images=False, log_std_init=cfg.log_std_init)
 
 

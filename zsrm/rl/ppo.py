@@ -214,7 +214,7 @@ def auxiliary_losses(cfg: TrainConfig, model: PPO, device: str) -> dict:
     the inverse-dynamics loss (``aux_inverse``) and the shift regulariser (``augment_shift``)."""
     losses = {}
     if cfg.aux_inverse:
-        points_dim = model.policy.features_extractor.out[0].in_features
+        points_dim = model.policy.features_extractor.points_dim
         losses["inverse"] = InverseDynamicsAux(points_dim, model.action_space.shape[0], seed=cfg.seed, device=device)
     if cfg.augment_shift:
         losses["shift"] = ShiftRegulariser(cfg.augment_shift, lr=cfg.learning_rate, seed=cfg.seed)
