@@ -260,5 +260,6 @@ def test_near_start_draws_nearer_pucks_for_training_envs_only():
     assert make_vec(cfg, 1, 0).envs[0].unwrapped.near_start is None  # evaluation starts as the scene does
     with pytest.raises(ValueError, match="near_start"):
         TrainConfig(goal="push_close", near_start=2.0)
-    with pytest.raises(ValueError, match="pushing"):
-        make_vec(TrainConfig(goal="stack", near_start=0.8), 1, 0, training=True)
+    for training in (True, False):  # evaluation's envs refuse it too
+        with pytest.raises(ValueError, match="pushing"):
+            make_vec(TrainConfig(goal="stack", near_start=0.8), 1, 0, training=training)

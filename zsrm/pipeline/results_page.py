@@ -358,6 +358,12 @@ SIDE = [
     ("side/rl/push_close_ends.json", "a push_close oracle policy (500k, seed 0) by start side, and its 20 of 30 "
      "episodes that never succeed: the pucks end 14.5 cm apart (close to: under 10), the nearest 14.3: the push "
      "stops short (probes/push_sides.py)"),
+    ("side/rl/push_scripts.json", "scripts on push_close's true state: one that steers the pusher back onto its puck's "
+     "line succeeds in 40 of 40 episodes at action repeat 4, pushing straight in 0.15, zsrm's controller (made for "
+     "action repeat 1) 0.93 / 0.78 / 0.30 at 1 / 2 / 4 (probes/push_scripts.py)"),
+    ("side/rl/push_state/*.json", "PPO on push_close's true state (a probe): v3's settings 0.38, as on pixels, and "
+     "0.04-0.39 under 18 others; relative positions in 10 cm units 0.89 on seeds 0-2 and 0.46 on 3-5 (500k); SAC "
+     "per seed (probes/push_state_ppo.py, each file's meta.command)"),
 ]
 
 # Files beside the figures: plots and tables of them, the models and runs they come from.

@@ -54,10 +54,11 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
         if entry.env_id != TABLETOP_ID:
             raise ValueError(f"lift_ceiling is for the tabletop's gripper; {cfg.goal!r} is not a tabletop task")
         kwargs["lift_ceiling"] = cfg.lift_ceiling
-    if cfg.near_start and training:
+    if cfg.near_start:  # checked for evaluation's envs too: a run's config is wrong whichever env reads it
         if entry.env_id != PUSHING_ID:
             raise ValueError(f"near_start is for the pushing scene's pucks; {cfg.goal!r} is not a pushing task")
-        kwargs["near_start"] = cfg.near_start
+        if training:
+            kwargs["near_start"] = cfg.near_start
     decisions = EPISODE_STEPS // cfg.action_repeat
     return vec_of([lambda: gym.make(entry.env_id, max_episode_steps=decisions, **kwargs)] * n_envs, seed, workers)
 
