@@ -1,0 +1,106 @@
+"""What would an off-policy learner from pixels cost, and does it start to learn push_close?
+
+PPO stops near success 0.3 on push_close whether it reads frames or true state; stable-baselines3's
+SAC on true state reached 0.83 (``probes/push_state_ppo.py --learner sac``). This probe trains SAC
+on what zsrm's PPO policy reads (the frozen VLM trunk's map and the 32 px frame, through the same
+keypoint extractor; actor and critic each with their own) with a zsrm reward, evaluating the mean
+action on zsrm's seeded evaluation episodes every ``--eval-every`` env steps. Not resumable and
+not in ``zsrm train``: a measurement of cost and of the first learning, for deciding whether SAC
+belongs there.
+
+    python probes/push_pixel_sac.py --reward oracle --steps 150000 --out results/side/rl/push_pixel_sac/oracle-0
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import torch  # noqa: E402
+from stable_baselines3 import SAC  # noqa: E402
+from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
+
+from zsrm.common.files import write_json  # noqa: E402
+from zsrm.rl.config import TrainConfig  # noqa: E402
+from zsrm.rl.evaluate import Evaluator  # noqa: E402
+from zsrm.rl.features import KeypointExtractor, policy_view  # noqa: E402
+from zsrm.rl.ppo import policy_act, rewarded_env, write_eval_csv  # noqa: E402
+from zsrm.vlm import load_vlm  # noqa: E402
+
+
+class Evaluate(BaseCallback):
+    def __init__(self, cfg: TrainConfig, evaluator: Evaluator, out: Path):
+        super().__init__()
+        self.cfg, self.evaluator, self.out, self.rows = cfg, evaluator, out, []
+        self.next_eval, self.t0, self.rewards = cfg.eval_every, time.time(), []
+
+    def env_steps(self) -> int:
+        return self.num_timesteps * self.cfg.action_repeat
+
+    def _on_step(self) -> bool:
+        self.rewards.append(float(self.locals["rewards"].mean()))
+        if self.env_steps() >= self.next_eval:
+            self.next_eval += self.cfg.eval_every
+            result = self.evaluator(policy_act(self.model, True), self.cfg.eval_episodes)
+            self.rows.append({"env_steps": self.env_steps(), "mean": result["mean"], "se": result["se"],
+                              "success_rate": result["success_rate"],
+                              "train_reward": sum(self.rewards) / len(self.rewards) * self.cfg.episode_decisions,
+                              "wall_s": round(time.time() - self.t0, 1)})
+            self.rewards = []
+            write_eval_csv(self.out / "eval.csv", self.rows)
+            print(self.rows[-1], flush=True)
+        return True
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--goal", default="push_close")
+    p.add_argument("--reward", default="oracle", choices=("oracle", "zsrm"))
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--steps", type=int, default=150_000, help="env (control) steps")
+    p.add_argument("--envs", type=int, default=4)
+    p.add_argument("--gradient-steps", type=int, default=1, help="per step of all the envs")
+    p.add_argument("--batch-size", type=int, default=256)
+    p.add_argument("--learning-starts", type=int, default=1000, help="decisions before the first gradient step")
+    p.add_argument("--eval-every", type=int, default=20_000)
+    p.add_argument("--eval-episodes", type=int, default=10, help="per evaluation; the final plays 30")
+    p.add_argument("--out", required=True)
+    args = p.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(1)
+    cfg = TrainConfig(goal=args.goal, reward=args.reward, seed=args.seed, steps=args.steps, n_envs=args.envs,
+                      eval_every=args.eval_every, eval_episodes=args.eval_episodes)
+    vlm = load_vlm(cfg.vlm)
+    venv = policy_view(rewarded_env(cfg, out, 0, 1)[0], vlm, cfg)
+    decisions = cfg.steps // cfg.action_repeat
+    model = SAC("MultiInputPolicy", venv, buffer_size=decisions, batch_size=args.batch_size,
+                learning_starts=args.learning_starts,
+                gamma=cfg.gamma, train_freq=1, gradient_steps=args.gradient_steps, seed=cfg.seed, verbose=0,
+                policy_kwargs=dict(features_extractor_class=KeypointExtractor, share_features_extractor=False,
+                                   features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels),
+                                   net_arch=[256, 256], normalize_images=False))
+    evaluator = Evaluator(cfg, 30, cfg.seed, wrap=lambda v: policy_view(v, vlm, cfg))
+    callback = Evaluate(cfg, evaluator, out)
+    start = time.time()
+    model.learn(decisions, callback=callback)
+    final = evaluator(policy_act(model, True), 30)
+    gradient_steps = model._n_updates
+    write_json(out / "summary.json", {
+        "final_mean": final["mean"], "final_se": final["se"], "final_success_rate": final["success_rate"],
+        "env_steps": callback.env_steps(), "gradient_steps": gradient_steps, "wall_s": time.time() - start,
+        "curve": callback.rows, "meta": {"learner": "stable-baselines3 SAC, its defaults but those named here",
+                                         "envs": args.envs, "gradient_steps_per_step": args.gradient_steps,
+                                         "batch_size": args.batch_size, "machine": "x86_64, 2 cores, no GPU",
+                                         "command": "python probes/push_pixel_sac.py " + " ".join(argv or [])}})
+    evaluator.close()
+    venv.close()
+
+
+if __name__ == "__main__":
+    import sys
+
+    main(sys.argv[1:])

@@ -1,0 +1,63 @@
+"""The push_close probes (probes/push_state_ppo.py, push_scripts.py, push_pixel_sac.py) at a tiny scale."""
+import json
+import runpy
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from zsrm.rl.config import TrainConfig
+
+PROBES = Path(__file__).parent.parent / "probes"
+
+
+def probe(name: str) -> dict:
+    return runpy.run_path(str(PROBES / name), run_name="probe")
+
+
+def run(name: str, monkeypatch, *args: str) -> None:
+    monkeypatch.setattr(sys, "argv", [str(PROBES / name), *args])
+    runpy.run_path(str(PROBES / name), run_name="__main__")
+
+
+@pytest.mark.parametrize("observe,width", [("positions", 6), ("relative", 4), ("pairs", 12)])
+def test_the_state_view_reads_the_pusher_and_pucks_and_never_renders(observe, width):
+    ns = probe("push_state_ppo.py")
+    env = ns["make_env"](TrainConfig(goal="push_close"), ns["Probe"](observe=observe, scale=0.1), seed=3)
+    obs, info = env.reset(seed=3)
+    scene = env.unwrapped
+    pusher, puck, other = scene.pusher_position[:2], *(info["object_positions"][c][:2] for c in scene.task.objects[:2])
+    assert obs.shape == (width,)
+    expected = {"positions": [pusher, puck, other], "relative": [puck - pusher, other - puck],
+                "pairs": [pusher, puck, other, puck - pusher, other - pusher, other - puck]}[observe]
+    np.testing.assert_allclose(obs, np.concatenate(expected) / 0.1, rtol=1e-5, atol=1e-5)
+    assert not scene._observation()["front"].any()  # a blank frame: no renderer runs
+    _, reward, _, _, info = env.step(np.zeros(2, np.float32))
+    assert reward == info["oracle_steps"]
+
+
+def test_the_state_probe_writes_its_trials_and_command(tmp_path, monkeypatch):
+    out = tmp_path / "state.json"
+    run("push_state_ppo.py", monkeypatch, "--steps", "2048", "--seeds", "0", "--episodes", "2",
+        "--observe", "relative", "--scale", "0.1", "--out", str(out))
+    result = json.loads(out.read_text())
+    assert [t["seed"] for t in result["trials"]] == [0]
+    assert 0.0 <= result["final_success_rate"] <= 1.0 and result["trials"][0]["final_action_std"] > 0
+    assert result["meta"]["probe"]["observe"] == "relative" and "--observe relative" in result["meta"]["command"]
+
+
+def test_a_steering_script_finishes_push_close_deciding_every_4_steps():
+    ns = probe("push_scripts.py")
+    steering, straight = (ns["play"](ns[name], 4, 4, 20_000) for name in ("align", "straight"))
+    assert steering["final_success_rate"] == 1.0
+    assert straight["final_success_rate"] < 1.0 and straight["final_mean"] < steering["final_mean"]
+
+
+def test_the_pixel_sac_probe_trains_and_evaluates(tmp_path, monkeypatch):
+    out = tmp_path / "sac"
+    run("push_pixel_sac.py", monkeypatch, "--steps", "1600", "--envs", "2", "--batch-size", "16",
+        "--learning-starts", "100", "--eval-every", "800", "--eval-episodes", "2", "--out", str(out))
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["gradient_steps"] > 0 and [r["env_steps"] for r in summary["curve"]] == [800, 1600]
+    assert (out / "eval.csv").read_text().count("\n") == 3  # the header and two evaluations
