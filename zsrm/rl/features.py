@@ -159,8 +159,8 @@ class KeypointExtractor(BaseFeaturesExtractor):
     keypoints beside them (``pixels``), -> a linear layer. ``pair_scale`` > 0 adds every pair of
     keypoints' difference (x_j - x_i, y_j - y_i) times ``pair_scale``: where one thing is from
     another, at a finer scale than the frame's [-1, 1]. PPO on true state learnt push_close from
-    the puck's place relative to the pusher in units of 10 cm, not from absolute places, nor from
-    relative ones in the table's units (``probes/push_state_ppo.py``)."""
+    the puck's place relative to the pusher in units of 10 cm, not from absolute places
+    (``probes/push_state_ppo.py``); on pixels these pairs did not (docs/training.md)."""
 
     def __init__(self, observation_space: gym.spaces.Dict, keypoints: int = 32, features_dim: int = 256,
                  pixels: bool = True, pair_scale: float = 0.0):
