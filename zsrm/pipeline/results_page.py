@@ -362,7 +362,7 @@ SIDE = [
      "line succeeds in 40 of 40 episodes at action repeat 4, pushing straight in 0.15, zsrm's controller (made for "
      "action repeat 1) 0.93 / 0.78 / 0.30 at 1 / 2 / 4 (probes/push_scripts.py)"),
     ("side/rl/push_state/*.json", "PPO on push_close's true state (a probe): v3's settings 0.38, as on pixels, and "
-     "0.04-0.39 under 18 others; relative positions in 10 cm units 0.89 on seeds 0-2 and 0.46 on 3-5 (500k); SAC 0.88 "
+     "0.04-0.39 under 19 others; relative positions in 10 cm units 0.89 on seeds 0-2 and 0.46 on 3-5 (500k); SAC 0.88 "
      "(3 seeds, a file each; probes/push_state_ppo.py, each file's meta.command)"),
     ("side/rl/push_pixel_sac/**", "stable-baselines3's SAC on what zsrm's PPO policy reads, push_close with the oracle "
      "(150k env steps, 9,125 gradient steps, 29 min beside other runs): 22.2, success 0.23; its cost per gradient "
