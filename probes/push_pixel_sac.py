@@ -21,38 +21,14 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import torch  # noqa: E402
 from stable_baselines3 import SAC  # noqa: E402
-from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
+from tqdm import tqdm  # noqa: E402
 
 from zsrm.common.files import write_json  # noqa: E402
 from zsrm.rl.config import TrainConfig  # noqa: E402
 from zsrm.rl.evaluate import Evaluator  # noqa: E402
 from zsrm.rl.features import KeypointExtractor, policy_view  # noqa: E402
-from zsrm.rl.ppo import policy_act, rewarded_env, write_eval_csv  # noqa: E402
+from zsrm.rl.ppo import EvalAndCheckpoint, policy_act, rewarded_env  # noqa: E402
 from zsrm.vlm import load_vlm  # noqa: E402
-
-
-class Evaluate(BaseCallback):
-    def __init__(self, cfg: TrainConfig, evaluator: Evaluator, out: Path):
-        super().__init__()
-        self.cfg, self.evaluator, self.out, self.rows = cfg, evaluator, out, []
-        self.next_eval, self.t0, self.rewards = cfg.eval_every, time.time(), []
-
-    def env_steps(self) -> int:
-        return self.num_timesteps * self.cfg.action_repeat
-
-    def _on_step(self) -> bool:
-        self.rewards.append(float(self.locals["rewards"].mean()))
-        if self.env_steps() >= self.next_eval:
-            self.next_eval += self.cfg.eval_every
-            result = self.evaluator(policy_act(self.model, True), self.cfg.eval_episodes)
-            self.rows.append({"env_steps": self.env_steps(), "mean": result["mean"], "se": result["se"],
-                              "success_rate": result["success_rate"],
-                              "train_reward": sum(self.rewards) / len(self.rewards) * self.cfg.episode_decisions,
-                              "wall_s": round(time.time() - self.t0, 1)})
-            self.rewards = []
-            write_eval_csv(self.out / "eval.csv", self.rows)
-            print(self.rows[-1], flush=True)
-        return True
 
 
 def main(argv=None):
@@ -72,8 +48,9 @@ def main(argv=None):
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
+    # zsrm train's evaluations and eval.csv, never its checkpoints (they keep PPO's state)
     cfg = TrainConfig(goal=args.goal, reward=args.reward, seed=args.seed, steps=args.steps, n_envs=args.envs,
-                      eval_every=args.eval_every, eval_episodes=args.eval_episodes)
+                      eval_every=args.eval_every, eval_episodes=args.eval_episodes, checkpoint_every=args.steps + 1)
     vlm = load_vlm(cfg.vlm)
     venv = policy_view(rewarded_env(cfg, out, 0, 1)[0], vlm, cfg)
     decisions = cfg.steps // cfg.action_repeat
@@ -84,9 +61,10 @@ def main(argv=None):
                                    features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels),
                                    net_arch=[256, 256], normalize_images=False))
     evaluator = Evaluator(cfg, 30, cfg.seed, wrap=lambda v: policy_view(v, vlm, cfg))
-    callback = Evaluate(cfg, evaluator, out)
     start = time.time()
-    model.learn(decisions, callback=callback)
+    with tqdm(total=cfg.steps, unit="step", desc=f"sac {cfg.reward} {cfg.goal}") as bar:
+        callback = EvalAndCheckpoint(cfg, out, evaluator, [], bar)
+        model.learn(decisions, callback=callback)
     final = evaluator(policy_act(model, True), 30)
     gradient_steps = model._n_updates
     write_json(out / "summary.json", {

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from zsrm.rl.config import TrainConfig
-from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor, keypoint_xy, pair_differences
+from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor, pair_differences
 
 
 def extractor(pixels: bool, pair_scale: float) -> KeypointExtractor:
@@ -25,7 +25,7 @@ def test_keypoint_xy_reads_every_branchs_positions_and_no_strength(pixels):
     net = extractor(pixels, 0.0)
     obs = observations()
     points = net.points(obs)
-    xy = keypoint_xy(points, net.pixels)
+    xy = net.keypoint_xy(points)
     pixel_count = net.pixels.out_dim // 3 if pixels else 0  # the pixel CNN's own keypoints
     assert xy.shape == (3, 5 + pixel_count, 2)
     vlm = net.softmax(net.heat_maps(obs[FEATURES_KEY]))
@@ -44,7 +44,7 @@ def test_pairs_are_every_difference_scaled_and_off_keeps_the_old_layer():
     assert paired.out[0].in_features == 3 * count + count * (count - 1)
     obs = observations()
     points = paired.points(obs)
-    features = torch.cat([points, 3.0 * pair_differences(keypoint_xy(points, paired.pixels))], dim=1)
+    features = torch.cat([points, 3.0 * pair_differences(paired.keypoint_xy(points))], dim=1)
     torch.testing.assert_close(paired(obs), paired.out(features))
 
 

@@ -170,7 +170,8 @@ class KeypointExtractor(BaseFeaturesExtractor):
         self.softmax = SpatialSoftmax(h, w)
         self.pixels = PixelKeypoints(observation_space[IMAGE_KEY].shape[-1]) if pixels else None
         self.pair_scale = float(pair_scale)
-        count = keypoints + (self.pixels.out_dim // 3 if pixels else 0)
+        self.branches = (keypoints, *((self.pixels.out_dim // 3,) if pixels else ()))  # keypoints per branch
+        count = sum(self.branches)
         self.points_dim = 3 * count  # what points() gives (the inverse-dynamics head reads it)
         self.out = nn.Sequential(nn.Linear(self.points_dim + (count * (count - 1) if pair_scale else 0), features_dim),
                                  nn.ReLU())
@@ -192,19 +193,17 @@ class KeypointExtractor(BaseFeaturesExtractor):
     def forward(self, observations: dict) -> torch.Tensor:
         points = self.points(observations)
         if self.pair_scale:
-            points = torch.cat([points, self.pair_scale * pair_differences(keypoint_xy(points, self.pixels))], dim=1)
+            points = torch.cat([points, self.pair_scale * pair_differences(self.keypoint_xy(points))], dim=1)
         return self.out(points)
 
-
-def keypoint_xy(points: torch.Tensor, pixels: PixelKeypoints | None) -> torch.Tensor:
-    """``(N, M, 2)``: the (x, y) of every keypoint in :meth:`KeypointExtractor.points`' output, whose
-    branches each hold their K points' (x, y) pairs, then their K strengths."""
-    n = pixels.out_dim // 3 if pixels is not None else 0
-    vlm = points[:, :points.shape[1] - 3 * n]
-    xy = [vlm[:, :2 * (vlm.shape[1] // 3)]]
-    if n:
-        xy.append(points[:, -3 * n:-n])
-    return torch.cat(xy, dim=1).reshape(len(points), -1, 2)
+    def keypoint_xy(self, points: torch.Tensor) -> torch.Tensor:
+        """``(N, M, 2)``: the (x, y) of every keypoint in :meth:`points`' output, in which each branch
+        holds its K points' (x, y) pairs, then their K strengths."""
+        xy, start = [], 0
+        for k in self.branches:
+            xy.append(points[:, start:start + 2 * k])
+            start += 3 * k
+        return torch.cat(xy, dim=1).reshape(len(points), -1, 2)
 
 
 def pair_differences(xy: torch.Tensor) -> torch.Tensor:
