@@ -26,9 +26,27 @@ from tqdm import tqdm  # noqa: E402
 from zsrm.common.files import write_json  # noqa: E402
 from zsrm.rl.config import TrainConfig  # noqa: E402
 from zsrm.rl.evaluate import Evaluator  # noqa: E402
-from zsrm.rl.features import KeypointExtractor, policy_view  # noqa: E402
+from zsrm.rl.augment import random_shift  # noqa: E402
+from zsrm.rl.features import IMAGE_KEY, KeypointExtractor, policy_view  # noqa: E402
 from zsrm.rl.ppo import EvalAndCheckpoint, policy_act, rewarded_env  # noqa: E402
 from zsrm.vlm import load_vlm  # noqa: E402
+
+
+def shifted_buffer(pad: int, seed: int):
+    """A replay buffer whose samples' pixel views are shifted by up to ``pad`` px (DrQ: the current
+    and the next frames each by their own shift); the VLM map is left as it is."""
+    from stable_baselines3.common.buffers import DictReplayBuffer
+
+    generator = torch.Generator().manual_seed(seed)
+
+    class ShiftedReplayBuffer(DictReplayBuffer):
+        def sample(self, batch_size, env=None):
+            batch = super().sample(batch_size, env)
+            for obs in (batch.observations, batch.next_observations):
+                obs[IMAGE_KEY] = random_shift(obs[IMAGE_KEY], pad, generator)
+            return batch
+
+    return ShiftedReplayBuffer
 
 
 def main(argv=None):
@@ -41,6 +59,7 @@ def main(argv=None):
     p.add_argument("--gradient-steps", type=int, default=1, help="per step of all the envs")
     p.add_argument("--batch-size", type=int, default=256)
     p.add_argument("--learning-starts", type=int, default=1000, help="decisions before the first gradient step")
+    p.add_argument("--shift", type=int, default=0, help="DrQ's random shift of sampled pixel views (px; 0: none)")
     p.add_argument("--eval-every", type=int, default=20_000)
     p.add_argument("--eval-episodes", type=int, default=10, help="per evaluation; the final plays 30")
     p.add_argument("--out", required=True)
@@ -56,6 +75,7 @@ def main(argv=None):
     decisions = cfg.steps // cfg.action_repeat
     model = SAC("MultiInputPolicy", venv, buffer_size=decisions, batch_size=args.batch_size,
                 learning_starts=args.learning_starts,
+                replay_buffer_class=shifted_buffer(args.shift, args.seed) if args.shift else None,
                 gamma=cfg.gamma, train_freq=1, gradient_steps=args.gradient_steps, seed=cfg.seed, verbose=0,
                 policy_kwargs=dict(features_extractor_class=KeypointExtractor, share_features_extractor=False,
                                    features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels),
@@ -72,7 +92,7 @@ def main(argv=None):
         "env_steps": callback.env_steps(), "gradient_steps": gradient_steps, "wall_s": time.time() - start,
         "curve": callback.rows, "meta": {"learner": "stable-baselines3 SAC, its defaults but those named here",
                                          "envs": args.envs, "gradient_steps_per_step": args.gradient_steps,
-                                         "batch_size": args.batch_size, "machine": "x86_64, 2 cores, no GPU",
+                                         "batch_size": args.batch_size, "shift": args.shift, "machine": "x86_64, 2 cores, no GPU",
                                          "command": "python probes/push_pixel_sac.py " + " ".join(argv or [])}})
     evaluator.close()
     venv.close()

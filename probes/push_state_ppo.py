@@ -50,6 +50,10 @@ class Probe:
     """the fraction of training episodes whose pusher starts level with its puck (a curriculum)"""
     noise_end: float | None = None
     """hold the policy's log std under a ceiling falling linearly to this over the run"""
+    sac_envs: int = 1
+    """SAC's envs, stepped together (one gradient step a step of them all: 1 / sac_envs per decision)"""
+    sac_gradient_steps: int = 1
+    """SAC's gradient steps per step of its envs"""
 
 
 class StateView(gym.Wrapper):
@@ -118,7 +122,8 @@ def evaluate(model, cfg: TrainConfig, probe: Probe, episodes: int, seed: int) ->
 
 def build(cfg: TrainConfig, probe: Probe, venv):
     if probe.learner == "sac":
-        return SAC("MlpPolicy", venv, gamma=cfg.gamma, seed=cfg.seed, verbose=0)
+        return SAC("MlpPolicy", venv, gamma=cfg.gamma, seed=cfg.seed, verbose=0,
+                   gradient_steps=probe.sac_gradient_steps)
     lr = (lambda f: f * cfg.learning_rate) if cfg.anneal_lr else cfg.learning_rate
     return PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                learning_rate=lr, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, ent_coef=cfg.ent_coef,
@@ -128,7 +133,7 @@ def build(cfg: TrainConfig, probe: Probe, venv):
 
 def train(cfg: TrainConfig, probe: Probe, episodes: int) -> dict:
     torch.manual_seed(cfg.seed)
-    n_envs = cfg.n_envs if probe.learner == "ppo" else 1
+    n_envs = cfg.n_envs if probe.learner == "ppo" else probe.sac_envs
     venv = DummyVecEnv([lambda i=i: make_env(cfg, probe, 1000 * cfg.seed + i, True) for i in range(n_envs)])
     start = time.time()
     model = build(cfg, probe, venv)
@@ -174,10 +179,13 @@ def main(argv=None):
     p.add_argument("--sde-every", type=int, default=0)
     p.add_argument("--aligned", type=float, default=0.0)
     p.add_argument("--noise-end", type=float, default=None)
+    p.add_argument("--sac-envs", type=int, default=1, help="SAC's envs, stepped together")
+    p.add_argument("--sac-gradient-steps", type=int, default=1, help="SAC's gradient steps per step of its envs")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
     torch.set_num_threads(1)
-    probe = Probe(args.observe, args.scale, args.learner, args.sde_every, args.aligned, args.noise_end)
+    probe = Probe(args.observe, args.scale, args.learner, args.sde_every, args.aligned, args.noise_end,
+                  args.sac_envs, args.sac_gradient_steps)
     overrides = parse_settings(args.set)
     trials = [train(TrainConfig(goal=args.goal, reward="oracle", steps=args.steps, seed=s, **overrides), probe,
                     args.episodes) for s in args.seeds]

@@ -61,3 +61,40 @@ def test_the_pixel_sac_probe_trains_and_evaluates(tmp_path, monkeypatch):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["gradient_steps"] > 0 and [r["env_steps"] for r in summary["curve"]] == [800, 1600]
     assert (out / "eval.csv").read_text().count("\n") == 3  # the header and two evaluations
+
+
+def test_the_pixel_sac_probes_shifted_buffer_moves_the_pixel_view_alone():
+    import gymnasium as gym
+    import torch
+
+    from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY
+
+    space = gym.spaces.Dict({FEATURES_KEY: gym.spaces.Box(0.0, 1.0, (2, 4, 4), np.float32),
+                             IMAGE_KEY: gym.spaces.Box(0, 255, (3, 8, 8), np.uint8)})
+    buffer = probe("push_pixel_sac.py")["shifted_buffer"](2, seed=0)(
+        16, space, gym.spaces.Box(-1.0, 1.0, (2,), np.float32), n_envs=1)
+    rng = np.random.default_rng(0)
+    for _ in range(16):
+        obs = {FEATURES_KEY: rng.random((1, 2, 4, 4), dtype=np.float32),
+               IMAGE_KEY: rng.integers(0, 256, (1, 3, 8, 8), dtype=np.uint8)}
+        buffer.add(obs, obs, np.zeros((1, 2), np.float32), np.zeros(1), np.zeros(1), [{}])
+    batch = buffer.sample(64)
+    stored = {k: torch.as_tensor(v[batch_rows(buffer, batch), 0]).float() for k, v in buffer.observations.items()}
+    assert torch.equal(batch.observations[FEATURES_KEY], stored[FEATURES_KEY])  # the VLM map as stored
+    assert batch.observations[IMAGE_KEY].shape == (64, 3, 8, 8)
+    assert not torch.equal(batch.observations[IMAGE_KEY], stored[IMAGE_KEY])  # some frames moved
+
+
+def batch_rows(buffer, batch) -> np.ndarray:
+    """The buffer rows a sample drew, found by its VLM maps (each row's map is unique)."""
+    maps = buffer.observations["features"][:buffer.size(), 0].reshape(buffer.size(), -1)
+    drawn = batch.observations["features"].numpy().reshape(len(batch.actions), -1)
+    return np.array([int(np.flatnonzero((maps == row).all(axis=1))[0]) for row in drawn])
+
+
+def test_the_state_probes_sac_records_its_envs_and_gradient_steps(tmp_path, monkeypatch):
+    out = tmp_path / "sac.json"
+    run("push_state_ppo.py", monkeypatch, "--learner", "sac", "--steps", "800", "--seeds", "0", "--episodes", "1",
+        "--sac-envs", "2", "--sac-gradient-steps", "2", "--out", str(out))
+    probe_meta = json.loads(out.read_text())["meta"]["probe"]
+    assert (probe_meta["learner"], probe_meta["sac_envs"], probe_meta["sac_gradient_steps"]) == ("sac", 2, 2)
