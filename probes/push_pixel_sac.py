@@ -19,7 +19,10 @@ from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from stable_baselines3.common.vec_env import VecEnvWrapper  # noqa: E402
 from stable_baselines3 import SAC  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
@@ -28,6 +31,7 @@ from zsrm.rl.config import TrainConfig  # noqa: E402
 from zsrm.rl.evaluate import Evaluator  # noqa: E402
 from zsrm.rl.augment import random_shift  # noqa: E402
 from zsrm.rl.features import IMAGE_KEY, KeypointExtractor, policy_view  # noqa: E402
+from zsrm.rl.policy import PolicyBundle  # noqa: E402
 from zsrm.rl.ppo import EvalAndCheckpoint, policy_act, rewarded_env  # noqa: E402
 from zsrm.vlm import load_vlm  # noqa: E402
 
@@ -49,6 +53,41 @@ def shifted_buffer(pad: int, seed: int):
     return ShiftedReplayBuffer
 
 
+class VecKeypoints(VecEnvWrapper):
+    """The policy view's keypoints (x, y, strength of every keypoint, :meth:`KeypointExtractor.points`)
+    read by a frozen extractor, as a flat observation: SAC then learns on them as on a state."""
+
+    def __init__(self, venv, extractor: KeypointExtractor):
+        self.extractor = extractor.eval()
+        for param in self.extractor.parameters():
+            param.requires_grad_(False)
+        space = gym.spaces.Box(-np.inf, np.inf, (extractor.points_dim,), np.float32)
+        super().__init__(venv, observation_space=space)
+
+    @torch.no_grad()
+    def convert(self, obs: dict) -> np.ndarray:
+        return self.extractor.points({k: torch.as_tensor(np.asarray(v)) for k, v in obs.items()}).numpy()
+
+    def reset(self):
+        return self.convert(self.venv.reset())
+
+    def step_wait(self):
+        obs, rewards, dones, infos = self.venv.step_wait()
+        for info in infos:
+            if "terminal_observation" in info:
+                info["terminal_observation"] = self.convert({k: v[None] for k, v in info["terminal_observation"].items()})[0]
+        return self.convert(obs), rewards, dones, infos
+
+
+def frozen_extractor(source: str, space, cfg: TrainConfig) -> KeypointExtractor:
+    """``random``: an untrained extractor (seeded by the run); else a trained zsrm policy's folder:
+    its extractor, as PPO left it."""
+    if source == "random":
+        torch.manual_seed(cfg.seed)
+        return KeypointExtractor(space, keypoints=cfg.keypoints, pixels=cfg.pixels)
+    return PolicyBundle.load(source).policy.features_extractor
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--goal", default="push_close")
@@ -60,10 +99,15 @@ def main(argv=None):
     p.add_argument("--batch-size", type=int, default=256)
     p.add_argument("--learning-starts", type=int, default=1000, help="decisions before the first gradient step")
     p.add_argument("--shift", type=int, default=0, help="DrQ's random shift of sampled pixel views (px; 0: none)")
+    p.add_argument("--keypoints-from", default="", metavar="random|POLICY",
+                   help="SAC on the keypoints of a frozen extractor (untrained, or a trained policy's) instead of "
+                        "learning its own")
     p.add_argument("--eval-every", type=int, default=20_000)
     p.add_argument("--eval-episodes", type=int, default=10, help="per evaluation; the final plays 30")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
+    if args.shift and args.keypoints_from:
+        p.error("--shift moves the pixel view SAC learns from; with --keypoints-from it reads frozen keypoints")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
@@ -72,15 +116,27 @@ def main(argv=None):
                       eval_every=args.eval_every, eval_episodes=args.eval_episodes, checkpoint_every=args.steps + 1)
     vlm = load_vlm(cfg.vlm)
     venv = policy_view(rewarded_env(cfg, out, 0, 1)[0], vlm, cfg)
+    extractor = frozen_extractor(args.keypoints_from, venv.observation_space, cfg) if args.keypoints_from else None
+
+    def view(v):  # what SAC reads of an env: the policy view, or its frozen keypoints
+        v = policy_view(v, vlm, cfg) if v is not venv else v
+        return VecKeypoints(v, extractor) if extractor is not None else v
+
+    train_env = view(venv)
     decisions = cfg.steps // cfg.action_repeat
-    model = SAC("MultiInputPolicy", venv, buffer_size=decisions, batch_size=args.batch_size,
+    if extractor is not None:
+        policy, policy_kwargs = "MlpPolicy", dict(net_arch=[256, 256])
+    else:
+        policy, policy_kwargs = "MultiInputPolicy", dict(
+            features_extractor_class=KeypointExtractor, share_features_extractor=False,
+            features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels), net_arch=[256, 256],
+            normalize_images=False)
+    model = SAC(policy, train_env, buffer_size=decisions, batch_size=args.batch_size,
                 learning_starts=args.learning_starts,
                 replay_buffer_class=shifted_buffer(args.shift, args.seed) if args.shift else None,
                 gamma=cfg.gamma, train_freq=1, gradient_steps=args.gradient_steps, seed=cfg.seed, verbose=0,
-                policy_kwargs=dict(features_extractor_class=KeypointExtractor, share_features_extractor=False,
-                                   features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels),
-                                   net_arch=[256, 256], normalize_images=False))
-    evaluator = Evaluator(cfg, 30, cfg.seed, wrap=lambda v: policy_view(v, vlm, cfg))
+                policy_kwargs=policy_kwargs)
+    evaluator = Evaluator(cfg, 30, cfg.seed, wrap=view)
     start = time.time()
     with tqdm(total=cfg.steps, unit="step", desc=f"sac {cfg.reward} {cfg.goal}") as bar:
         callback = EvalAndCheckpoint(cfg, out, evaluator, [], bar)
@@ -92,10 +148,11 @@ def main(argv=None):
         "env_steps": callback.env_steps(), "gradient_steps": gradient_steps, "wall_s": time.time() - start,
         "curve": callback.rows, "meta": {"learner": "stable-baselines3 SAC, its defaults but those named here",
                                          "envs": args.envs, "gradient_steps_per_step": args.gradient_steps,
-                                         "batch_size": args.batch_size, "shift": args.shift, "machine": "x86_64, 2 cores, no GPU",
+                                         "batch_size": args.batch_size, "shift": args.shift,
+                                         "keypoints_from": args.keypoints_from, "machine": "x86_64, 2 cores, no GPU",
                                          "command": "python probes/push_pixel_sac.py " + " ".join(argv or [])}})
     evaluator.close()
-    venv.close()
+    train_env.close()
 
 
 if __name__ == "__main__":

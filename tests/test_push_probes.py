@@ -98,3 +98,49 @@ def test_the_state_probes_sac_records_its_envs_and_gradient_steps(tmp_path, monk
         "--sac-envs", "2", "--sac-gradient-steps", "2", "--out", str(out))
     probe_meta = json.loads(out.read_text())["meta"]["probe"]
     assert (probe_meta["learner"], probe_meta["sac_envs"], probe_meta["sac_gradient_steps"]) == ("sac", 2, 2)
+
+
+def test_the_pixel_sac_probe_learns_on_a_frozen_extractors_keypoints(tmp_path, monkeypatch):
+    out = tmp_path / "kp"
+    run("push_pixel_sac.py", monkeypatch, "--steps", "800", "--envs", "2", "--batch-size", "16",
+        "--learning-starts", "50", "--eval-every", "800", "--eval-episodes", "1", "--keypoints-from", "random",
+        "--out", str(out))
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["gradient_steps"] > 0 and summary["meta"]["keypoints_from"] == "random"
+
+
+def test_frozen_keypoints_are_the_extractors_points_and_stay_frozen():
+    import gymnasium as gym
+    import torch
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor
+
+    space = gym.spaces.Dict({FEATURES_KEY: gym.spaces.Box(0.0, 1.0, (4, 4, 4), np.float32),
+                             IMAGE_KEY: gym.spaces.Box(0, 255, (3, 16, 16), np.uint8)})
+
+    space.seed(0)
+    first, last = space.sample(), space.sample()
+
+    class Still(gym.Env):
+        observation_space, action_space = space, gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+        def reset(self, seed=None, options=None):
+            return first, {}
+
+        def step(self, action):
+            return last, 0.0, True, False, {}
+
+    ns = probe("push_pixel_sac.py")
+    extractor = KeypointExtractor(space, keypoints=3)
+    venv = ns["VecKeypoints"](DummyVecEnv([Still]), extractor)
+    obs = venv.reset()
+    assert obs.shape == (1, extractor.points_dim) and venv.observation_space.shape == (extractor.points_dim,)
+    assert not any(p.requires_grad for p in extractor.parameters())
+    _, _, dones, infos = venv.step(np.zeros((1, 2), np.float32))
+    with torch.no_grad():
+        expected = [extractor.points({k: torch.as_tensor(v[None]) for k, v in o.items()})[0].numpy()
+                    for o in (first, last)]
+    np.testing.assert_allclose(obs[0], expected[0], rtol=1e-6)
+    assert dones[0]
+    np.testing.assert_allclose(infos[0]["terminal_observation"], expected[1], rtol=1e-6)  # the episode's last frame
