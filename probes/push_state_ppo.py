@@ -54,6 +54,9 @@ class Probe:
     """SAC's envs, stepped together (one gradient step a step of them all: 1 / sac_envs per decision)"""
     sac_gradient_steps: int = 1
     """SAC's gradient steps per step of its envs"""
+    noise: float = 0.0
+    """metres of Gaussian noise on each observed (x, y), drawn anew each step: how exact a view
+    of the scene the learner needs (a keypoint's error stands in here)"""
 
 
 class StateView(gym.Wrapper):
@@ -73,6 +76,8 @@ class StateView(gym.Wrapper):
 
     def state(self, info) -> np.ndarray:
         pusher, puck, other = self.env.unwrapped.pusher_position[:2], *(info["object_positions"][c][:2] for c in self.objects)
+        if self.probe.noise:
+            pusher, puck, other = (p + self.rng.normal(0.0, self.probe.noise, 2) for p in (pusher, puck, other))
         points = [pusher, puck, other]
         if self.probe.observe == "relative":
             points = [puck - pusher, other - puck]
@@ -179,13 +184,14 @@ def main(argv=None):
     p.add_argument("--sde-every", type=int, default=0)
     p.add_argument("--aligned", type=float, default=0.0)
     p.add_argument("--noise-end", type=float, default=None)
+    p.add_argument("--noise", type=float, default=0.0, help="metres of Gaussian noise on each observed position")
     p.add_argument("--sac-envs", type=int, default=1, help="SAC's envs, stepped together")
     p.add_argument("--sac-gradient-steps", type=int, default=1, help="SAC's gradient steps per step of its envs")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     probe = Probe(args.observe, args.scale, args.learner, args.sde_every, args.aligned, args.noise_end,
-                  args.sac_envs, args.sac_gradient_steps)
+                  args.sac_envs, args.sac_gradient_steps, args.noise)
     overrides = parse_settings(args.set)
     trials = [train(TrainConfig(goal=args.goal, reward="oracle", steps=args.steps, seed=s, **overrides), probe,
                     args.episodes) for s in args.seeds]
