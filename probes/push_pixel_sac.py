@@ -1,14 +1,17 @@
-"""What would an off-policy learner from pixels cost, and does it start to learn push_close?
+"""What would an off-policy learner from pixels cost, and does it learn push_close?
 
 PPO stops near success 0.3 on push_close whether it reads frames or true state; stable-baselines3's
-SAC on true state reached 0.83 (``probes/push_state_ppo.py --learner sac``). This probe trains SAC
+SAC on true state reached 0.88 (``probes/push_state_ppo.py --learner sac``). This probe trains SAC
 on what zsrm's PPO policy reads (the frozen VLM trunk's map and the 32 px frame, through the same
 keypoint extractor; actor and critic each with their own) with a zsrm reward, evaluating the mean
-action on zsrm's seeded evaluation episodes every ``--eval-every`` env steps. Not resumable and
-not in ``zsrm train``: a measurement of cost and of the first learning, for deciding whether SAC
-belongs there.
+action on zsrm's seeded evaluation episodes every ``--eval-every`` env steps. ``--shift N``: DrQ's
+random shifts of the sampled pixel views. ``--keypoints-from random|POLICY``: SAC on the keypoints of
+a frozen extractor instead (an untrained one, or a trained zsrm policy's), as on a state. Not
+resumable, no policy saved, not in ``zsrm train``: a measurement for deciding what belongs there.
 
     python probes/push_pixel_sac.py --reward oracle --steps 150000 --out results/side/rl/push_pixel_sac/oracle-0
+    python probes/push_pixel_sac.py --reward oracle --keypoints-from results/rl/pilots/v3-push_close-oracle-pairs3-500k-0/policy \
+        --out results/side/rl/push_pixel_sac/keypoints-ppo-oracle-0
 """
 from __future__ import annotations
 

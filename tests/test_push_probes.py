@@ -144,3 +144,19 @@ def test_frozen_keypoints_are_the_extractors_points_and_stay_frozen():
     np.testing.assert_allclose(obs[0], expected[0], rtol=1e-6)
     assert dones[0]
     np.testing.assert_allclose(infos[0]["terminal_observation"], expected[1], rtol=1e-6)  # the episode's last frame
+
+
+def test_the_state_views_noise_moves_each_position_by_about_its_size():
+    ns = probe("push_state_ppo.py")
+    env = ns["make_env"](TrainConfig(goal="push_close"), ns["Probe"](scale=1.0, noise=0.01), seed=3)
+    obs, info = env.reset(seed=3)
+    scene = env.unwrapped
+    true = np.concatenate([scene.pusher_position[:2], *(info["object_positions"][c][:2] for c in scene.task.objects[:2])])
+    errors = [obs - true]
+    for _ in range(30):
+        obs, _, _, _, info = env.step(np.zeros(2, np.float32))
+        true = np.concatenate([scene.pusher_position[:2],
+                               *(info["object_positions"][c][:2] for c in scene.task.objects[:2])])
+        errors.append(obs - true)
+    spread = np.std(np.concatenate(errors))
+    assert 0.007 < spread < 0.013  # 186 draws of a 1 cm normal
