@@ -115,8 +115,11 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
     # zsrm train's evaluations and eval.csv, never its checkpoints (they keep PPO's state)
+    # a trained extractor reads the views it was trained on (its policy's trunk and pixel sizes)
+    source = PolicyBundle.load(args.keypoints_from).cfg if args.keypoints_from not in ("", "random") else TrainConfig()
     cfg = TrainConfig(goal=args.goal, reward=args.reward, seed=args.seed, steps=args.steps, n_envs=args.envs,
-                      eval_every=args.eval_every, eval_episodes=args.eval_episodes, checkpoint_every=args.steps + 1)
+                      eval_every=args.eval_every, eval_episodes=args.eval_episodes, checkpoint_every=args.steps + 1,
+                      trunk_size=source.trunk_size, pixel_size=source.pixel_size)
     vlm = load_vlm(cfg.vlm)
     venv = policy_view(rewarded_env(cfg, out, 0, 1)[0], vlm, cfg)
     extractor = frozen_extractor(args.keypoints_from, venv.observation_space, cfg) if args.keypoints_from else None

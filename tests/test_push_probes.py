@@ -160,3 +160,17 @@ def test_the_state_views_noise_moves_each_position_by_about_its_size():
         errors.append(obs - true)
     spread = np.std(np.concatenate(errors))
     assert 0.007 < spread < 0.013  # 186 draws of a 1 cm normal
+
+
+def test_the_pixel_sac_probe_reads_a_trained_extractor_on_its_own_views(tmp_path, monkeypatch):
+    from zsrm.rl.ppo import train
+
+    # a tiny PPO policy whose pixel CNN reads 16 px frames, not the default 32
+    cfg = TrainConfig(goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128,
+                      n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=1, keypoints=4, pixel_size=16)
+    train(cfg, tmp_path / "ppo", progress=False)
+    out = tmp_path / "kp"
+    run("push_pixel_sac.py", monkeypatch, "--steps", "400", "--envs", "2", "--batch-size", "8",
+        "--learning-starts", "20", "--eval-every", "400", "--eval-episodes", "1",
+        "--keypoints-from", str(tmp_path / "ppo" / "policy"), "--out", str(out))
+    assert json.loads((out / "summary.json").read_text())["gradient_steps"] > 0
