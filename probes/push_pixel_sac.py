@@ -25,8 +25,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from stable_baselines3.common.vec_env import VecEnvWrapper  # noqa: E402
 from stable_baselines3 import SAC  # noqa: E402
+from stable_baselines3.common.vec_env import VecEnvWrapper  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from zsrm.common.files import write_json  # noqa: E402
@@ -82,13 +82,13 @@ class VecKeypoints(VecEnvWrapper):
         return self.convert(obs), rewards, dones, infos
 
 
-def frozen_extractor(source: str, space, cfg: TrainConfig) -> KeypointExtractor:
-    """``random``: an untrained extractor (seeded by the run); else a trained zsrm policy's folder:
-    its extractor, as PPO left it."""
-    if source == "random":
-        torch.manual_seed(cfg.seed)
-        return KeypointExtractor(space, keypoints=cfg.keypoints, pixels=cfg.pixels)
-    return PolicyBundle.load(source).policy.features_extractor
+def frozen_extractor(bundle: PolicyBundle | None, space, cfg: TrainConfig) -> KeypointExtractor:
+    """A trained zsrm policy's extractor, as PPO left it; without one, an untrained extractor
+    (seeded by the run)."""
+    if bundle is not None:
+        return bundle.policy.features_extractor
+    torch.manual_seed(cfg.seed)
+    return KeypointExtractor(space, keypoints=cfg.keypoints, pixels=cfg.pixels)
 
 
 def main(argv=None):
@@ -114,21 +114,21 @@ def main(argv=None):
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
-    # zsrm train's evaluations and eval.csv, never its checkpoints (they keep PPO's state)
     # a trained extractor reads the views it was trained on (its policy's trunk and pixel sizes)
-    source = PolicyBundle.load(args.keypoints_from).cfg if args.keypoints_from not in ("", "random") else TrainConfig()
+    bundle = PolicyBundle.load(args.keypoints_from) if args.keypoints_from not in ("", "random") else None
+    source = bundle.cfg if bundle is not None else TrainConfig()
+    # zsrm train's evaluations and eval.csv, never its checkpoints (they keep PPO's state)
     cfg = TrainConfig(goal=args.goal, reward=args.reward, seed=args.seed, steps=args.steps, n_envs=args.envs,
                       eval_every=args.eval_every, eval_episodes=args.eval_episodes, checkpoint_every=args.steps + 1,
                       trunk_size=source.trunk_size, pixel_size=source.pixel_size)
     vlm = load_vlm(cfg.vlm)
     venv = policy_view(rewarded_env(cfg, out, 0, 1)[0], vlm, cfg)
-    extractor = frozen_extractor(args.keypoints_from, venv.observation_space, cfg) if args.keypoints_from else None
+    extractor = frozen_extractor(bundle, venv.observation_space, cfg) if args.keypoints_from else None
 
-    def view(v):  # what SAC reads of an env: the policy view, or its frozen keypoints
-        v = policy_view(v, vlm, cfg) if v is not venv else v
+    def keypoints(v):  # what SAC reads of a policy view: the view itself, or its frozen keypoints
         return VecKeypoints(v, extractor) if extractor is not None else v
 
-    train_env = view(venv)
+    train_env = keypoints(venv)
     decisions = cfg.steps // cfg.action_repeat
     if extractor is not None:
         policy, policy_kwargs = "MlpPolicy", dict(net_arch=[256, 256])
@@ -142,7 +142,7 @@ def main(argv=None):
                 replay_buffer_class=shifted_buffer(args.shift, args.seed) if args.shift else None,
                 gamma=cfg.gamma, train_freq=1, gradient_steps=args.gradient_steps, seed=cfg.seed, verbose=0,
                 policy_kwargs=policy_kwargs)
-    evaluator = Evaluator(cfg, 30, cfg.seed, wrap=view)
+    evaluator = Evaluator(cfg, 30, cfg.seed, wrap=lambda v: keypoints(policy_view(v, vlm, cfg)))
     start = time.time()
     with tqdm(total=cfg.steps, unit="step", desc=f"sac {cfg.reward} {cfg.goal}") as bar:
         callback = EvalAndCheckpoint(cfg, out, evaluator, [], bar)
