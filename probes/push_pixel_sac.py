@@ -6,7 +6,9 @@ on what zsrm's PPO policy reads (the frozen VLM trunk's map and the 32 px frame,
 keypoint extractor; actor and critic each with their own) with a zsrm reward, evaluating the mean
 action on zsrm's seeded evaluation episodes every ``--eval-every`` env steps. ``--shift N``: DrQ's
 random shifts of the sampled pixel views. ``--keypoints-from random|POLICY``: SAC on the keypoints of
-a frozen extractor instead (an untrained one, or a trained zsrm policy's), as on a state. Not
+a frozen extractor instead (an untrained one, or a trained zsrm policy's), as on a state.
+``--finetune-from POLICY``: SAC on the policy view whose actor's and critic's extractors start as a
+trained zsrm policy's and go on learning (the critic's from its loss, as in DrQ). Not
 resumable, no policy saved, not in ``zsrm train``: a measurement for deciding what belongs there.
 
     python probes/push_pixel_sac.py --reward oracle --steps 150000 --out results/side/rl/push_pixel_sac/oracle-0
@@ -91,6 +93,13 @@ def frozen_extractor(bundle: PolicyBundle | None, space, cfg: TrainConfig) -> Ke
     return KeypointExtractor(space, keypoints=cfg.keypoints, pixels=cfg.pixels)
 
 
+def start_extractors(model: SAC, extractor: KeypointExtractor) -> None:
+    """Start every extractor of ``model`` (the actor's, the critic's and its target's) as ``extractor``."""
+    state = extractor.state_dict()
+    for net in (model.actor, model.critic, model.critic_target):
+        net.features_extractor.load_state_dict(state)
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--goal", default="push_close")
@@ -105,17 +114,22 @@ def main(argv=None):
     p.add_argument("--keypoints-from", default="", metavar="random|POLICY",
                    help="SAC on the keypoints of a frozen extractor (untrained, or a trained policy's) instead of "
                         "learning its own")
+    p.add_argument("--finetune-from", default="", metavar="POLICY",
+                   help="SAC on the policy view, its extractors started from a trained policy's and trained on")
     p.add_argument("--eval-every", type=int, default=20_000)
     p.add_argument("--eval-episodes", type=int, default=10, help="per evaluation; the final plays 30")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
     if args.shift and args.keypoints_from:
         p.error("--shift moves the pixel view SAC learns from; with --keypoints-from it reads frozen keypoints")
+    if args.keypoints_from and args.finetune_from:
+        p.error("--keypoints-from freezes an extractor, --finetune-from trains one on: give one")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
     # a trained extractor reads the views it was trained on (its policy's trunk and pixel sizes)
-    bundle = PolicyBundle.load(args.keypoints_from) if args.keypoints_from not in ("", "random") else None
+    trained = args.finetune_from or (args.keypoints_from if args.keypoints_from != "random" else "")
+    bundle = PolicyBundle.load(trained) if trained else None
     source = bundle.cfg if bundle is not None else TrainConfig()
     # zsrm train's evaluations and eval.csv, never its checkpoints (they keep PPO's state)
     cfg = TrainConfig(goal=args.goal, reward=args.reward, seed=args.seed, steps=args.steps, n_envs=args.envs,
@@ -135,13 +149,17 @@ def main(argv=None):
     else:
         policy, policy_kwargs = "MultiInputPolicy", dict(
             features_extractor_class=KeypointExtractor, share_features_extractor=False,
-            features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels), net_arch=[256, 256],
+            features_extractor_kwargs=dict(keypoints=source.keypoints, pixels=source.pixels,
+                                           pair_scale=source.pair_scale, pixel_stride=source.pixel_stride),
+            net_arch=[256, 256],
             normalize_images=False)
     model = SAC(policy, train_env, buffer_size=decisions, batch_size=args.batch_size,
                 learning_starts=args.learning_starts,
                 replay_buffer_class=shifted_buffer(args.shift, args.seed) if args.shift else None,
                 gamma=cfg.gamma, train_freq=1, gradient_steps=args.gradient_steps, seed=cfg.seed, verbose=0,
                 policy_kwargs=policy_kwargs)
+    if args.finetune_from:
+        start_extractors(model, bundle.policy.features_extractor)
     evaluator = Evaluator(cfg, 30, cfg.seed, wrap=lambda v: keypoints(policy_view(v, vlm, cfg)))
     start = time.time()
     with tqdm(total=cfg.steps, unit="step", desc=f"sac {cfg.reward} {cfg.goal}") as bar:
@@ -155,7 +173,8 @@ def main(argv=None):
         "curve": callback.rows, "meta": {"learner": "stable-baselines3 SAC, its defaults but those named here",
                                          "envs": args.envs, "gradient_steps_per_step": args.gradient_steps,
                                          "batch_size": args.batch_size, "shift": args.shift,
-                                         "keypoints_from": args.keypoints_from, "machine": "x86_64, 2 cores, no GPU",
+                                         "keypoints_from": args.keypoints_from,
+                                         "finetune_from": args.finetune_from, "machine": "x86_64, 2 cores, no GPU",
                                          "command": "python probes/push_pixel_sac.py " + " ".join(argv or [])}})
     evaluator.close()
     train_env.close()

@@ -54,3 +54,22 @@ def test_pair_scale_is_unwritten_when_off_and_unread_by_the_random_policy():
     assert "pair_scale" not in TrainConfig(goal="push_close", reward="random", pair_scale=3.0).to_dict()
     with pytest.raises(ValueError, match="pair_scale must be >= 0"):
         TrainConfig(goal="push_close", pair_scale=-1.0)
+
+
+@pytest.mark.parametrize("stride, cells", [(4, 4), (2, 8)])
+def test_the_pixel_cnns_stride_sets_its_heat_maps_side(stride, cells):
+    space = gym.spaces.Dict({FEATURES_KEY: gym.spaces.Box(0.0, np.inf, (6, 8, 8), np.float32),
+                             IMAGE_KEY: gym.spaces.Box(0, 255, (3, 16, 16), np.uint8)})
+    net = KeypointExtractor(space, keypoints=5, features_dim=8, pixel_stride=stride)
+    images = observations()[IMAGE_KEY]
+    assert net.pixels.cnn(images.float() / 255).shape[-2:] == (cells, cells)
+    assert net.pixels.softmax.grid.shape == (cells * cells, 2)
+    assert net(observations()).shape == (3, 8)  # the same keypoints and features, on finer maps
+
+
+def test_pixel_stride_is_unwritten_at_4_and_checked():
+    assert "pixel_stride" not in TrainConfig(goal="push_close").to_dict()  # runs before it stay the same runs
+    assert TrainConfig(goal="push_close", pixel_stride=2).to_dict()["pixel_stride"] == 2
+    assert "pixel_stride" not in TrainConfig(goal="push_close", reward="random", pixel_stride=2).to_dict()
+    with pytest.raises(ValueError, match="pixel_stride is 2 or 4"):
+        TrainConfig(goal="push_close", pixel_stride=3)

@@ -174,3 +174,76 @@ def test_the_pixel_sac_probe_reads_a_trained_extractor_on_its_own_views(tmp_path
         "--learning-starts", "20", "--eval-every", "400", "--eval-episodes", "1",
         "--keypoints-from", str(tmp_path / "ppo" / "policy"), "--out", str(out))
     assert json.loads((out / "summary.json").read_text())["gradient_steps"] > 0
+
+
+def test_the_pixel_sac_probe_starts_every_extractor_from_a_trained_policys(tmp_path, monkeypatch):
+    from zsrm.rl.ppo import train
+
+    cfg = TrainConfig(goal="push_close", reward="oracle", steps=128, eval_every=128, checkpoint_every=128,
+                      n_envs=2, n_steps=32, batch_size=32, n_epochs=1, eval_episodes=1, keypoints=4, pixel_size=16,
+                      pixel_stride=2)
+    train(cfg, tmp_path / "ppo", progress=False)
+    out = tmp_path / "ft"
+    run("push_pixel_sac.py", monkeypatch, "--steps", "400", "--envs", "2", "--batch-size", "8",
+        "--learning-starts", "20", "--eval-every", "400", "--eval-episodes", "1",
+        "--finetune-from", str(tmp_path / "ppo" / "policy"), "--out", str(out))
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["gradient_steps"] > 0 and summary["meta"]["finetune_from"].endswith("policy")
+
+
+def test_start_extractors_copies_the_trained_extractor_into_actor_critic_and_target():
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor
+
+    space = gym.spaces.Dict({FEATURES_KEY: gym.spaces.Box(0.0, 1.0, (4, 8, 8), np.float32),
+                             IMAGE_KEY: gym.spaces.Box(0, 255, (3, 16, 16), np.uint8)})
+
+    class Still(gym.Env):
+        observation_space, action_space = space, gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+        def reset(self, seed=None, options=None):
+            return space.sample(), {}
+
+        def step(self, action):
+            return space.sample(), 0.0, True, False, {}
+
+    kwargs = dict(keypoints=3, pixel_stride=2)
+    model = SAC("MultiInputPolicy", DummyVecEnv([Still]), buffer_size=10, policy_kwargs=dict(
+        features_extractor_class=KeypointExtractor, features_extractor_kwargs=kwargs, share_features_extractor=False,
+        normalize_images=False))
+    torch.manual_seed(1)
+    trained = KeypointExtractor(space, **kwargs)
+    probe("push_pixel_sac.py")["start_extractors"](model, trained)
+    for net in (model.actor, model.critic, model.critic_target):
+        for name, value in trained.state_dict().items():
+            torch.testing.assert_close(net.features_extractor.state_dict()[name], value)
+    assert model.actor.features_extractor is not model.critic.features_extractor  # each trains on
+
+
+def test_the_keypoint_precision_probe_scores_each_extractor_in_cm(tmp_path, monkeypatch):
+    out = tmp_path / "precision.json"
+    run("keypoint_precision.py", monkeypatch, "--episodes", "4", "--steps", "5", "--extractors", "random",
+        "--out", str(out))
+    result = json.loads(out.read_text())
+    errors = result["extractors"]["random"]["error_cm"]
+    assert set(errors) >= {"pusher x", "puck y", "other x", "puck from pusher", "mean"}
+    assert all(np.isfinite(v) and v >= 0 for v in errors.values())
+    assert result["frames"]["held_out"] > 0 and result["meta"]["command"].startswith("python probes/keypoint_precision.py")
+
+
+def test_the_keypoint_precision_probes_frames_hold_the_true_places():
+    from zsrm.rl.envs import make_vec
+
+    ns = probe("keypoint_precision.py")
+    cfg = TrainConfig(goal="push_close")
+    venv = make_vec(cfg, 1, 0)
+    images, targets, episode = ns["collect"](venv, cfg, 2, 0)
+    venv.close()
+    assert images.shape[1:] == (64, 64, 3) and targets.shape == (len(images), 6)
+    assert set(episode) == {0, 1} and np.abs(targets).max() < 0.5  # table (x, y) in metres
+    moved = np.abs(np.diff(targets[episode == 0, :2], axis=0)).max()  # the script walks the pusher
+    assert moved > 0.005

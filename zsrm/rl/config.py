@@ -52,6 +52,9 @@ class TrainConfig:
     """spatial-softmax keypoints the policy reads from the VLM feature map"""
     pixels: bool = True
     """also a small CNN on the raw frame, trained by RL (sees the gripper, which the VLM hardly does)"""
+    pixel_stride: int = 4
+    """the pixel CNN's stride: its keypoints' heat maps are the pixel view's side over this (2 or 4; at
+    a 32 px view 4 gives 8x8 maps, a cell about 8 cm of the table)"""
     pair_scale: float = 0.0
     """also give the policy every pair of keypoints' difference (x_j - x_i, y_j - y_i) times this (the
     frame spans 2: 3 makes a unit about 10 cm of the table): on true state, PPO learnt push_close from
@@ -150,7 +153,7 @@ class TrainConfig:
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
              "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0,
              "near_start": 0.0, "zsrm_correct_every": 0, "zsrm_correct_frames": 128,
-             "zsrm_correct_box_area": 0.0, "pair_scale": 0.0}
+             "zsrm_correct_box_area": 0.0, "pair_scale": 0.0, "pixel_stride": 4}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
@@ -172,6 +175,8 @@ class TrainConfig:
             from zsrm.envs.pushing import check_near_start
 
             check_near_start(self.near_start)
+        if self.pixel_stride not in (2, 4):
+            raise ValueError(f"pixel_stride is 2 or 4, got {self.pixel_stride}")
         if self.pair_scale < 0:
             raise ValueError(f"pair_scale must be >= 0 (0: no keypoint pairs), got {self.pair_scale}")
         if self.lift_ceiling < 0:
@@ -226,6 +231,7 @@ class TrainConfig:
             self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
         if self.reward == "random":  # uniform random actions: no policy network reads its inputs
             self.pair_scale = self.ADDED["pair_scale"]
+            self.pixel_stride = self.ADDED["pixel_stride"]
         if self.reward != "vice":  # the same for VICE's classifier updates
             self.vice_update_every = self.ADDED["vice_update_every"]
             self.vice_oracle_labels = self.ADDED["vice_oracle_labels"]

@@ -141,13 +141,16 @@ class SpatialSoftmax(nn.Module):
 
 
 class PixelKeypoints(nn.Module):
-    """A small CNN on the raw frame (stride 4) to ``K`` keypoints, trained by RL."""
+    """A small CNN on the raw frame to ``K`` keypoints, trained by RL. ``stride`` 4 (the default) or 2:
+    its heat maps are a quarter or half the frame's side (at 32 px a cell is 8 or 4 cm of table)."""
 
-    def __init__(self, size: int, keypoints: int = 16):
+    def __init__(self, size: int, keypoints: int = 16, stride: int = 4):
         super().__init__()
-        self.cnn = nn.Sequential(nn.Conv2d(3, 16, 3, 2, 1), nn.ReLU(), nn.Conv2d(16, 32, 3, 2, 1), nn.ReLU(),
+        if stride not in (2, 4):
+            raise ValueError(f"the pixel CNN's stride is 2 or 4, got {stride}")
+        self.cnn = nn.Sequential(nn.Conv2d(3, 16, 3, 2, 1), nn.ReLU(), nn.Conv2d(16, 32, 3, stride // 2, 1), nn.ReLU(),
                                  nn.Conv2d(32, keypoints, 3, 1, 1))
-        self.softmax = SpatialSoftmax(size // 4, size // 4)
+        self.softmax = SpatialSoftmax(size // stride, size // stride)
         self.out_dim = 3 * keypoints
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
@@ -156,19 +159,19 @@ class PixelKeypoints(nn.Module):
 
 class KeypointExtractor(BaseFeaturesExtractor):
     """VLM feature map -> 1x1 convs -> K keypoints (x, y, strength), with the pixel CNN's
-    keypoints beside them (``pixels``), -> a linear layer. ``pair_scale`` > 0 adds every pair of
+    keypoints beside them (``pixels``, its stride ``pixel_stride``), -> a linear layer. ``pair_scale`` > 0 adds every pair of
     keypoints' difference (x_j - x_i, y_j - y_i) times ``pair_scale``: where one thing is from
     another, at a finer scale than the frame's [-1, 1]. PPO on true state learnt push_close from
     the puck's place relative to the pusher in units of 10 cm, not from absolute places
     (``probes/push_state_ppo.py``); on pixels these pairs did not (docs/training.md)."""
 
     def __init__(self, observation_space: gym.spaces.Dict, keypoints: int = 32, features_dim: int = 256,
-                 pixels: bool = True, pair_scale: float = 0.0):
+                 pixels: bool = True, pair_scale: float = 0.0, pixel_stride: int = 4):
         super().__init__(observation_space, features_dim)
         c, h, w = observation_space[FEATURES_KEY].shape
         self.heat = nn.Sequential(nn.Conv2d(c, 64, 1), nn.ReLU(), nn.Conv2d(64, keypoints, 1))
         self.softmax = SpatialSoftmax(h, w)
-        self.pixels = PixelKeypoints(observation_space[IMAGE_KEY].shape[-1]) if pixels else None
+        self.pixels = PixelKeypoints(observation_space[IMAGE_KEY].shape[-1], stride=pixel_stride) if pixels else None
         self.pair_scale = float(pair_scale)
         self.branches = (keypoints, *((self.pixels.out_dim // 3,) if pixels else ()))  # keypoints per branch
         count = sum(self.branches)

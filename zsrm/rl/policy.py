@@ -27,7 +27,8 @@ KIND = "zsrm-policy"
 
 def policy_kwargs(cfg: TrainConfig) -> dict:
     return dict(features_extractor_class=KeypointExtractor,
-                features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels, pair_scale=cfg.pair_scale),
+                features_extractor_kwargs=dict(keypoints=cfg.keypoints, pixels=cfg.pixels, pair_scale=cfg.pair_scale,
+                                               pixel_stride=cfg.pixel_stride),
                 net_arch=dict(pi=[256], vf=[256]), normalize_images=False, log_std_init=cfg.log_std_init)
 
 
