@@ -8,12 +8,12 @@ walks the pusher round and behind its puck and pushes, half random actions; 25 d
 episode at action repeat 4) go through each extractor named, frozen; a small MLP (two layers of 256)
 is fitted on the training episodes' keypoints to the pusher's and both pucks' table (x, y), and
 scored on held-out episodes: the mean absolute error in cm of each position and of the puck's
-place from the pusher (what steering reads). ``random`` is an untrained extractor; ``supervised``
-trains a fresh extractor of a named policy's settings together with the MLP (the most its
-architecture can hold).
+place from the pusher (what steering reads). ``random`` is an untrained extractor; ``--supervised
+SETTINGS`` trains a fresh extractor of those settings (zsrm train's, e.g. ``pixel_size=64,pixel_stride=2``;
+``default``: v3's) together with the MLP: the most its architecture can hold.
 
     python probes/keypoint_precision.py --extractors random results/rl/pilots/v3-push_close-oracle-pixels64-200k-0/policy \\
-        --out results/side/rl/keypoint_precision.json
+        --supervised default pixel_size=64,pixel_stride=2 --out results/side/rl/keypoint_precision.json
 """
 from __future__ import annotations
 
@@ -30,6 +30,7 @@ from tqdm import tqdm  # noqa: E402
 
 from zsrm.common.files import write_json  # noqa: E402
 from zsrm.envs.scripted import scripted_controller  # noqa: E402
+from zsrm.pipeline.learn import parse_settings  # noqa: E402
 from zsrm.rl.config import TrainConfig  # noqa: E402
 from zsrm.rl.envs import make_vec  # noqa: E402
 from zsrm.rl.features import KeypointExtractor, policy_view  # noqa: E402
@@ -70,16 +71,18 @@ def observations(venv, vlm, cfg: TrainConfig, images: np.ndarray, size: int = 25
 
 
 def extractor_for(name: str, venv, vlm, images: np.ndarray, seed: int) -> tuple[KeypointExtractor, dict, TrainConfig]:
-    """The extractor ``name`` says (``random``: untrained; ``supervised:POLICY``: untrained, of that
-    policy's settings; else a trained policy's), the frames as it sees them, and its settings."""
-    trained = name.removeprefix("supervised:")
-    cfg = TrainConfig(goal="push_close") if trained == "random" else PolicyBundle.load(trained).cfg
-    obs, space = observations(venv, vlm, cfg, images)
-    if trained != name or trained == "random":
+    """The extractor ``name`` says (``random``: untrained; ``supervised:SETTINGS``: untrained, of those
+    settings; else a trained policy's folder), the frames as it sees them, and its settings."""
+    if name == "random" or name.startswith("supervised:"):
+        settings = name.removeprefix("supervised:")
+        items = [] if settings in ("random", "default") else settings.split(",")
+        cfg = TrainConfig(goal="push_close", **parse_settings(items))
+        obs, space = observations(venv, vlm, cfg, images)
         torch.manual_seed(seed)
         return KeypointExtractor(space, keypoints=cfg.keypoints, pixels=cfg.pixels,
                                  pixel_stride=cfg.pixel_stride), obs, cfg
-    return PolicyBundle.load(trained).policy.features_extractor.eval(), obs, cfg
+    bundle = PolicyBundle.load(name)
+    return bundle.policy.features_extractor.eval(), observations(venv, vlm, bundle.cfg, images)[0], bundle.cfg
 
 
 def fit(points_of, targets: torch.Tensor, train: np.ndarray, params: list, steps: int, seed: int) -> torch.Tensor:
@@ -115,8 +118,9 @@ def errors_cm(pred: torch.Tensor, true: torch.Tensor) -> dict:
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--extractors", nargs="+", default=["random"], help="random, or trained policy folders")
-    p.add_argument("--supervised", nargs="*", default=[], help="policy folders whose settings a fresh "
-                   "extractor trained with the MLP takes (the most the architecture holds)")
+    p.add_argument("--supervised", nargs="*", default=[], metavar="SETTINGS",
+                   help="a fresh extractor of these zsrm train settings (KEY=VALUE,KEY=VALUE or default) trained "
+                        "with the MLP: the most the architecture holds")
     p.add_argument("--episodes", type=int, default=80, help="half scripted, half random actions")
     p.add_argument("--steps", type=int, default=3000, help="Adam steps of each fit")
     p.add_argument("--seed", type=int, default=0)

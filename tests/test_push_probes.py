@@ -227,8 +227,10 @@ def test_start_extractors_copies_the_trained_extractor_into_actor_critic_and_tar
 def test_the_keypoint_precision_probe_scores_each_extractor_in_cm(tmp_path, monkeypatch):
     out = tmp_path / "precision.json"
     run("keypoint_precision.py", monkeypatch, "--episodes", "4", "--steps", "5", "--extractors", "random",
-        "--out", str(out))
+        "--supervised", "pixel_size=64,pixel_stride=2", "--out", str(out))
     result = json.loads(out.read_text())
+    supervised = result["extractors"]["supervised:pixel_size=64,pixel_stride=2"]
+    assert (supervised["pixel_size"], supervised["pixel_stride"]) == (64, 2)
     errors = result["extractors"]["random"]["error_cm"]
     assert set(errors) >= {"pusher x", "puck y", "other x", "puck from pusher", "mean"}
     assert all(np.isfinite(v) and v >= 0 for v in errors.values())
