@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import runpy
 import time
+from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -72,7 +74,8 @@ def observations(venv, vlm, cfg: TrainConfig, images: np.ndarray, size: int = 25
 
 def extractor_for(name: str, venv, vlm, images: np.ndarray, seed: int) -> tuple[KeypointExtractor, dict, TrainConfig]:
     """The extractor ``name`` says (``random``: untrained; ``supervised:SETTINGS``: untrained, of those
-    settings; else a trained policy's folder), the frames as it sees them, and its settings."""
+    settings; a folder of ``keypoint_autoencoder.py``'s; else a trained policy's folder), the frames as
+    it sees them, and its settings."""
     if name == "random" or name.startswith("supervised:"):
         settings = name.removeprefix("supervised:")
         items = [] if settings in ("random", "default") else settings.split(",")
@@ -81,6 +84,12 @@ def extractor_for(name: str, venv, vlm, images: np.ndarray, seed: int) -> tuple[
         torch.manual_seed(seed)
         return KeypointExtractor(space, keypoints=cfg.keypoints, pixels=cfg.pixels,
                                  pixel_stride=cfg.pixel_stride), obs, cfg
+    if (Path(name) / "extractor.pt").is_file():  # probes/keypoint_autoencoder.py's
+        load = runpy.run_path(str(Path(__file__).with_name("keypoint_autoencoder.py")))["load_extractor"]
+        settings = load(name, None, settings_only=True)
+        cfg = TrainConfig(goal="push_close", **settings)
+        obs, space = observations(venv, vlm, cfg, images)
+        return load(name, space)[0], obs, cfg
     bundle = PolicyBundle.load(name)
     return bundle.policy.features_extractor.eval(), observations(venv, vlm, bundle.cfg, images)[0], bundle.cfg
 

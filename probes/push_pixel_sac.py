@@ -18,7 +18,9 @@ resumable, no policy saved, not in ``zsrm train``: a measurement for deciding wh
 from __future__ import annotations
 
 import argparse
+import functools
 import os
+import runpy
 import time
 from pathlib import Path
 
@@ -84,11 +86,35 @@ class VecKeypoints(VecEnvWrapper):
         return self.convert(obs), rewards, dones, infos
 
 
-def frozen_extractor(bundle: PolicyBundle | None, space, cfg: TrainConfig) -> KeypointExtractor:
-    """A trained zsrm policy's extractor, as PPO left it; without one, an untrained extractor
-    (seeded by the run)."""
-    if bundle is not None:
-        return bundle.policy.features_extractor
+def is_autoencoder(folder: str) -> bool:
+    """Whether ``folder`` holds an extractor of ``probes/keypoint_autoencoder.py``."""
+    return bool(folder) and (Path(folder) / "extractor.pt").is_file()
+
+
+def load_autoencoder(folder: str, space, settings_only: bool = False):
+    return runpy.run_path(str(Path(__file__).with_name("keypoint_autoencoder.py")))["load_extractor"](
+        folder, space, settings_only)
+
+
+@functools.lru_cache
+def load_policy(folder: str) -> PolicyBundle:  # once: its settings and its extractor come from one load
+    return PolicyBundle.load(folder)
+
+
+def trained_settings(trained: str) -> TrainConfig:
+    """The settings of the views a trained extractor reads (zsrm train's defaults for none)."""
+    if is_autoencoder(trained):
+        return TrainConfig(**load_autoencoder(trained, None, settings_only=True))
+    return load_policy(trained).cfg if trained else TrainConfig()
+
+
+def trained_extractor(trained: str, space, cfg: TrainConfig) -> KeypointExtractor:
+    """A trained zsrm policy's extractor, as PPO left it, or a keypoint autoencoder's; without one, an
+    untrained extractor (seeded by the run)."""
+    if is_autoencoder(trained):
+        return load_autoencoder(trained, space)[0]
+    if trained:
+        return load_policy(trained).policy.features_extractor
     torch.manual_seed(cfg.seed)
     return KeypointExtractor(space, keypoints=cfg.keypoints, pixels=cfg.pixels)
 
@@ -129,37 +155,36 @@ def main(argv=None):
     torch.set_num_threads(1)
     # a trained extractor reads the views it was trained on (its policy's trunk and pixel sizes)
     trained = args.finetune_from or (args.keypoints_from if args.keypoints_from != "random" else "")
-    bundle = PolicyBundle.load(trained) if trained else None
-    source = bundle.cfg if bundle is not None else TrainConfig()
+    source = trained_settings(trained)
     # zsrm train's evaluations and eval.csv, never its checkpoints (they keep PPO's state)
     cfg = TrainConfig(goal=args.goal, reward=args.reward, seed=args.seed, steps=args.steps, n_envs=args.envs,
                       eval_every=args.eval_every, eval_episodes=args.eval_episodes, checkpoint_every=args.steps + 1,
                       trunk_size=source.trunk_size, pixel_size=source.pixel_size)
     vlm = load_vlm(cfg.vlm)
     venv = policy_view(rewarded_env(cfg, out, 0, 1)[0], vlm, cfg)
-    extractor = frozen_extractor(bundle, venv.observation_space, cfg) if args.keypoints_from else None
+    start_from = trained_extractor(trained, venv.observation_space, cfg) if trained or args.keypoints_from else None
+    frozen = start_from if args.keypoints_from else None
 
     def keypoints(v):  # what SAC reads of a policy view: the view itself, or its frozen keypoints
-        return VecKeypoints(v, extractor) if extractor is not None else v
+        return VecKeypoints(v, frozen) if frozen is not None else v
 
     train_env = keypoints(venv)
     decisions = cfg.steps // cfg.action_repeat
-    if extractor is not None:
+    if frozen is not None:
         policy, policy_kwargs = "MlpPolicy", dict(net_arch=[256, 256])
     else:
         policy, policy_kwargs = "MultiInputPolicy", dict(
             features_extractor_class=KeypointExtractor, share_features_extractor=False,
             features_extractor_kwargs=dict(keypoints=source.keypoints, pixels=source.pixels,
                                            pair_scale=source.pair_scale, pixel_stride=source.pixel_stride),
-            net_arch=[256, 256],
-            normalize_images=False)
+            net_arch=[256, 256], normalize_images=False)
     model = SAC(policy, train_env, buffer_size=decisions, batch_size=args.batch_size,
                 learning_starts=args.learning_starts,
                 replay_buffer_class=shifted_buffer(args.shift, args.seed) if args.shift else None,
                 gamma=cfg.gamma, train_freq=1, gradient_steps=args.gradient_steps, seed=cfg.seed, verbose=0,
                 policy_kwargs=policy_kwargs)
     if args.finetune_from:
-        start_extractors(model, bundle.policy.features_extractor)
+        start_extractors(model, start_from)
     evaluator = Evaluator(cfg, 30, cfg.seed, wrap=lambda v: keypoints(policy_view(v, vlm, cfg)))
     start = time.time()
     with tqdm(total=cfg.steps, unit="step", desc=f"sac {cfg.reward} {cfg.goal}") as bar:

@@ -249,3 +249,35 @@ def test_the_keypoint_precision_probes_frames_hold_the_true_places():
     assert set(episode) == {0, 1} and np.abs(targets).max() < 0.5  # table (x, y) in metres
     moved = np.abs(np.diff(targets[episode == 0, :2], axis=0)).max()  # the script walks the pusher
     assert moved > 0.005
+
+
+def test_the_autoencoders_blobs_peak_at_their_points():
+    import torch
+
+    gaussian_maps = probe("keypoint_autoencoder.py")["gaussian_maps"]
+    maps = gaussian_maps(torch.tensor([[[-1.0, -1.0], [1.0, 0.0]]]), 9, 0.1)
+    assert maps.shape == (1, 2, 9, 9)
+    assert divmod(int(maps[0, 0].argmax()), 9) == (0, 0)  # (x, y) = (-1, -1): the top-left cell
+    assert divmod(int(maps[0, 1].argmax()), 9) == (4, 8)  # (1, 0): the middle row's last cell
+    assert float(maps.max()) == pytest.approx(1.0)
+
+
+def test_the_keypoint_autoencoder_rebuilds_half_the_frame_and_learns(tmp_path, monkeypatch):
+    import torch
+
+    ns = probe("keypoint_autoencoder.py")
+    model = ns["KeypointAutoencoder"](32, keypoints=4, stride=2)
+    frames = torch.randint(0, 256, (6, 3, 32, 32), dtype=torch.uint8)
+    assert model(frames[:3], frames[3:]).shape == (3, 3, 16, 16)
+    assert model.points(frames).shape == (6, 4, 2)
+    out = tmp_path / "ae"
+    run("keypoint_autoencoder.py", monkeypatch, "--episodes", "8", "--steps", "3", "--batch-size", "4",
+        "--pixel-size", "32", "--out", str(out))
+    training = json.loads((out / "training.json").read_text())
+    assert training["frames"] > 0 and np.isfinite(training["loss_last_100"])
+    # a SAC run reads its keypoints, frozen, on the views it was trained on (32 px here)
+    sac = tmp_path / "sac"
+    run("push_pixel_sac.py", monkeypatch, "--steps", "400", "--envs", "2", "--batch-size", "8",
+        "--learning-starts", "20", "--eval-every", "400", "--eval-episodes", "1", "--keypoints-from", str(out),
+        "--out", str(sac))
+    assert json.loads((sac / "summary.json").read_text())["gradient_steps"] > 0
