@@ -6,7 +6,8 @@ CNN sees, to 2-5 cm by PPO-trained extractors, against 0.5-0.9 cm for the same a
 on true places. This probe trains the pixel CNN (zsrm's ``PixelKeypoints``) as the encoder of a
 keypoint autoencoder, on frames of random actions alone (after Jakab et al. 2018): a frame is
 rebuilt from another frame of its episode (appearance) and its own keypoints, drawn as Gaussian
-blobs (geometry), so the keypoints must follow what moves. It saves a frozen extractor (zsrm's
+blobs (geometry), so the keypoints must follow what moves; ``--inverse-weight`` adds zsrm's
+inverse-dynamics loss (the random action from two consecutive frames' keypoints). It saves a frozen extractor (zsrm's
 ``KeypointExtractor``: the VLM branch untrained, the pixel branch the encoder) for
 ``keypoint_precision.py`` and ``push_pixel_sac.py --keypoints-from``.
 
@@ -27,6 +28,7 @@ from torch import nn  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from zsrm.common.files import write_json  # noqa: E402
+from zsrm.rl.auxiliary import InverseDynamics  # noqa: E402
 from zsrm.rl.config import TrainConfig  # noqa: E402
 from zsrm.rl.envs import make_vec  # noqa: E402
 from zsrm.rl.features import KeypointExtractor, PixelKeypoints, policy_view, shrink_frames  # noqa: E402
@@ -36,22 +38,26 @@ from zsrm.vlm import load_vlm  # noqa: E402
 EXTRACTOR = "extractor.pt"
 
 
-def random_frames(goal: str, episodes: int, envs: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Goal-camera frames (N, 64, 64, 3) of uniform random actions and each frame's episode."""
+def random_frames(goal: str, episodes: int, envs: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Goal-camera frames (N, 64, 64, 3) of uniform random actions, each frame's episode and the
+    action taken after it (NaN after an episode's last frame)."""
     cfg = TrainConfig(goal=goal, reward="oracle")
     venv, camera = make_vec(cfg, envs, seed), goal_camera(goal)
     rng = np.random.default_rng(seed)
-    frames, episode = [], []
+    frames, episode, actions = [], [], []
     for e in tqdm(range(0, episodes, envs), desc="frames", unit="episode", unit_scale=envs):
         obs = venv.reset()
         for _ in range(cfg.episode_decisions):
+            action = rng.uniform(-1, 1, (envs, *venv.action_space.shape)).astype(np.float32)
             frames.append(obs[camera])
             episode.append(e + np.arange(envs))
-            obs, _, dones, _ = venv.step(rng.uniform(-1, 1, (envs, *venv.action_space.shape)).astype(np.float32))
-            if dones.any():
+            obs, _, dones, _ = venv.step(action)
+            actions.append(np.where(dones[:, None], np.nan, action))  # the next frame is another episode's
+            if dones.any():  # the next frames come after a reset: no action leads to them
+                actions[-1][:] = np.nan
                 break
     venv.close()
-    return np.concatenate(frames), np.concatenate(episode)
+    return np.concatenate(frames), np.concatenate(episode), np.concatenate(actions)
 
 
 def gaussian_maps(xy: torch.Tensor, side: int, sigma: float) -> torch.Tensor:
@@ -90,18 +96,28 @@ class KeypointAutoencoder(nn.Module):
         return self.decoder(torch.cat([self.appearance(source.float() / 255.0), maps], dim=1))
 
 
-def train(model: KeypointAutoencoder, frames: torch.Tensor, episode: np.ndarray, steps: int, batch: int,
-          seed: int) -> list[float]:
-    """Adam on the squared error of each rebuilt target frame (the source: another frame of its episode)."""
+def train(model: KeypointAutoencoder, frames: torch.Tensor, episode: np.ndarray, actions: np.ndarray, envs: int,
+          steps: int, batch: int, inverse_weight: float, seed: int) -> list[float]:
+    """Adam on the squared error of each rebuilt target frame (the source: another frame of its
+    episode), plus ``inverse_weight`` times an inverse-dynamics loss: the random action taken between
+    a frame and its env's next (``envs`` frames on) predicted from the two frames' keypoints."""
     rng = np.random.default_rng(seed)
     by_episode = {e: np.flatnonzero(episode == e) for e in np.unique(episode)}
-    optimiser = torch.optim.Adam(model.parameters(), lr=1e-3)
+    with_next = np.flatnonzero(~np.isnan(actions).any(axis=1))
+    k = model.keypoints.cnn[-1].out_channels
+    inverse = InverseDynamics(2 * k, actions.shape[1]) if inverse_weight else nn.Identity()
+    optimiser = torch.optim.Adam([*model.parameters(), *inverse.parameters()], lr=1e-3)
     losses = []
     for _ in tqdm(range(steps), desc="autoencoder", unit="step"):
         target = rng.integers(0, len(frames), batch)
         source = np.array([rng.choice(by_episode[episode[t]]) for t in target])
         rebuilt = model(frames[source], frames[target])
         loss = (rebuilt - nn.functional.avg_pool2d(frames[target].float() / 255.0, 2)).square().mean()
+        if inverse_weight:
+            before = rng.choice(with_next, batch)
+            points = model.points(frames[np.concatenate([before, before + envs])]).flatten(1)
+            predicted = inverse(points[:batch], points[batch:])
+            loss = loss + inverse_weight * (predicted - torch.as_tensor(actions[before])).square().mean()
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
@@ -118,6 +134,8 @@ def main(argv=None):
     p.add_argument("--steps", type=int, default=3000)
     p.add_argument("--batch-size", type=int, default=32)
     p.add_argument("--sigma", type=float, default=0.1, help="the blobs' std in the frame's [-1, 1] units")
+    p.add_argument("--inverse-weight", type=float, default=0.0,
+                   help="add this times an inverse-dynamics loss (the random action from two frames' keypoints)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
@@ -125,10 +143,11 @@ def main(argv=None):
     torch.manual_seed(args.seed)
     out, start = Path(args.out), time.time()
     out.mkdir(parents=True, exist_ok=True)
-    images, episode = random_frames(args.goal, args.episodes, 8, args.seed)
+    envs = 8
+    images, episode, actions = random_frames(args.goal, args.episodes, envs, args.seed)
     frames = torch.as_tensor(shrink_frames(images, args.pixel_size))
     model = KeypointAutoencoder(args.pixel_size, 16, args.pixel_stride, args.sigma)
-    losses = train(model, frames, episode, args.steps, args.batch_size, args.seed)
+    losses = train(model, frames, episode, actions, envs, args.steps, args.batch_size, args.inverse_weight, args.seed)
     # the extractor a SAC run reads: an untrained VLM branch (seeded) beside the trained pixel branch
     cfg = TrainConfig(goal=args.goal, pixel_size=args.pixel_size, pixel_stride=args.pixel_stride)
     venv = make_vec(cfg, 1, args.seed)

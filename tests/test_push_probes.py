@@ -272,7 +272,7 @@ def test_the_keypoint_autoencoder_rebuilds_half_the_frame_and_learns(tmp_path, m
     assert model.points(frames).shape == (6, 4, 2)
     out = tmp_path / "ae"
     run("keypoint_autoencoder.py", monkeypatch, "--episodes", "8", "--steps", "3", "--batch-size", "4",
-        "--pixel-size", "32", "--out", str(out))
+        "--pixel-size", "32", "--inverse-weight", "1", "--out", str(out))
     training = json.loads((out / "training.json").read_text())
     assert training["frames"] > 0 and np.isfinite(training["loss_last_100"])
     # a SAC run reads its keypoints, frozen, on the views it was trained on (32 px here)
@@ -281,3 +281,13 @@ def test_the_keypoint_autoencoder_rebuilds_half_the_frame_and_learns(tmp_path, m
         "--learning-starts", "20", "--eval-every", "400", "--eval-episodes", "1", "--keypoints-from", str(out),
         "--out", str(sac))
     assert json.loads((sac / "summary.json").read_text())["gradient_steps"] > 0
+
+
+def test_the_autoencoders_random_frames_pair_each_action_with_its_envs_next_frame():
+    frames, episode, actions = probe("keypoint_autoencoder.py")["random_frames"]("push_close", 4, 2, 0)
+    assert len(frames) == len(episode) == len(actions) and actions.shape[1] == 2
+    ends = np.isnan(actions).any(axis=1)
+    assert ends[-2:].all()  # the last step of the envs' episodes leads to no frame of theirs
+    valid = np.flatnonzero(~ends)
+    assert np.all(episode[valid + 2] == episode[valid])  # the next frame (2 envs on) is the same episode's
+    assert np.abs(actions[valid]).max() <= 1.0
