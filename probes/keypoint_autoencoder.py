@@ -97,10 +97,11 @@ class KeypointAutoencoder(nn.Module):
 
 
 def train(model: KeypointAutoencoder, frames: torch.Tensor, episode: np.ndarray, actions: np.ndarray, envs: int,
-          steps: int, batch: int, inverse_weight: float, seed: int) -> list[float]:
+          steps: int, batch: int, inverse_weight: float, seed: int, any_source: float = 0.0) -> list[float]:
     """Adam on the squared error of each rebuilt target frame (the source: another frame of its
-    episode), plus ``inverse_weight`` times an inverse-dynamics loss: the random action taken between
-    a frame and its env's next (``envs`` frames on) predicted from the two frames' keypoints."""
+    episode, or with probability ``any_source`` any frame, whose pucks lie elsewhere), plus
+    ``inverse_weight`` times an inverse-dynamics loss: the random action taken between a frame and
+    its env's next (``envs`` frames on) predicted from the two frames' keypoints."""
     rng = np.random.default_rng(seed)
     by_episode = {e: np.flatnonzero(episode == e) for e in np.unique(episode)}
     with_next = np.flatnonzero(~np.isnan(actions).any(axis=1))
@@ -111,6 +112,9 @@ def train(model: KeypointAutoencoder, frames: torch.Tensor, episode: np.ndarray,
     for _ in tqdm(range(steps), desc="autoencoder", unit="step"):
         target = rng.integers(0, len(frames), batch)
         source = np.array([rng.choice(by_episode[episode[t]]) for t in target])
+        if any_source:
+            anywhere = rng.random(batch) < any_source
+            source[anywhere] = rng.integers(0, len(frames), int(anywhere.sum()))
         rebuilt = model(frames[source], frames[target])
         loss = (rebuilt - nn.functional.avg_pool2d(frames[target].float() / 255.0, 2)).square().mean()
         if inverse_weight:
@@ -136,6 +140,9 @@ def main(argv=None):
     p.add_argument("--sigma", type=float, default=0.1, help="the blobs' std in the frame's [-1, 1] units")
     p.add_argument("--inverse-weight", type=float, default=0.0,
                    help="add this times an inverse-dynamics loss (the random action from two frames' keypoints)")
+    p.add_argument("--any-source", type=float, default=0.0,
+                   help="the fraction of rebuilds whose source is any frame, not one of the target's episode (the "
+                        "keypoints must then say where the pucks are too)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
@@ -147,7 +154,8 @@ def main(argv=None):
     images, episode, actions = random_frames(args.goal, args.episodes, envs, args.seed)
     frames = torch.as_tensor(shrink_frames(images, args.pixel_size))
     model = KeypointAutoencoder(args.pixel_size, 16, args.pixel_stride, args.sigma)
-    losses = train(model, frames, episode, actions, envs, args.steps, args.batch_size, args.inverse_weight, args.seed)
+    losses = train(model, frames, episode, actions, envs, args.steps, args.batch_size, args.inverse_weight, args.seed,
+                   args.any_source)
     # the extractor a SAC run reads: an untrained VLM branch (seeded) beside the trained pixel branch
     cfg = TrainConfig(goal=args.goal, pixel_size=args.pixel_size, pixel_stride=args.pixel_stride)
     venv = make_vec(cfg, 1, args.seed)
