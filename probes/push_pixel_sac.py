@@ -39,7 +39,7 @@ from zsrm.rl.evaluate import Evaluator  # noqa: E402
 from zsrm.rl.augment import random_shift  # noqa: E402
 from zsrm.rl.features import IMAGE_KEY, KeypointExtractor, policy_view  # noqa: E402
 from zsrm.rl.policy import PolicyBundle  # noqa: E402
-from zsrm.rl.ppo import EvalAndCheckpoint, policy_act, rewarded_env  # noqa: E402
+from zsrm.rl.ppo import EvalAndCheckpoint, LinearDecay, policy_act, rewarded_env  # noqa: E402
 from zsrm.vlm import load_vlm  # noqa: E402
 
 
@@ -142,6 +142,8 @@ def main(argv=None):
                         "learning its own")
     p.add_argument("--finetune-from", default="", metavar="POLICY",
                    help="SAC on the policy view, its extractors started from a trained policy's and trained on")
+    p.add_argument("--anneal-lr", action="store_true",
+                   help="decay SAC's learning rate (3e-4) linearly to 0 over the run, as zsrm train's PPO does")
     p.add_argument("--eval-every", type=int, default=20_000)
     p.add_argument("--eval-episodes", type=int, default=10, help="per evaluation; the final plays 30")
     p.add_argument("--out", required=True)
@@ -178,7 +180,8 @@ def main(argv=None):
             features_extractor_kwargs=dict(keypoints=source.keypoints, pixels=source.pixels,
                                            pair_scale=source.pair_scale, pixel_stride=source.pixel_stride),
             net_arch=[256, 256], normalize_images=False)
-    model = SAC(policy, train_env, buffer_size=decisions, batch_size=args.batch_size,
+    model = SAC(policy, train_env, learning_rate=LinearDecay(3e-4) if args.anneal_lr else 3e-4,
+                buffer_size=decisions, batch_size=args.batch_size,
                 learning_starts=args.learning_starts,
                 replay_buffer_class=shifted_buffer(args.shift, args.seed) if args.shift else None,
                 gamma=cfg.gamma, train_freq=1, gradient_steps=args.gradient_steps, seed=cfg.seed, verbose=0,
@@ -199,7 +202,8 @@ def main(argv=None):
                                          "envs": args.envs, "gradient_steps_per_step": args.gradient_steps,
                                          "batch_size": args.batch_size, "shift": args.shift,
                                          "keypoints_from": args.keypoints_from,
-                                         "finetune_from": args.finetune_from, "machine": "x86_64, 2 cores, no GPU",
+                                         "finetune_from": args.finetune_from, "anneal_lr": args.anneal_lr,
+                                         "machine": "x86_64, 2 cores, no GPU",
                                          "command": "python probes/push_pixel_sac.py " + " ".join(argv or [])}})
     evaluator.close()
     train_env.close()

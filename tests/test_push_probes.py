@@ -104,9 +104,10 @@ def test_the_pixel_sac_probe_learns_on_a_frozen_extractors_keypoints(tmp_path, m
     out = tmp_path / "kp"
     run("push_pixel_sac.py", monkeypatch, "--steps", "800", "--envs", "2", "--batch-size", "16",
         "--learning-starts", "50", "--eval-every", "800", "--eval-episodes", "1", "--keypoints-from", "random",
-        "--out", str(out))
+        "--anneal-lr", "--out", str(out))
     summary = json.loads((out / "summary.json").read_text())
     assert summary["gradient_steps"] > 0 and summary["meta"]["keypoints_from"] == "random"
+    assert summary["meta"]["anneal_lr"] is True
 
 
 def test_frozen_keypoints_are_the_extractors_points_and_stay_frozen():
