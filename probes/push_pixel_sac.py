@@ -9,7 +9,8 @@ random shifts of the sampled pixel views. ``--keypoints-from random|POLICY``: SA
 a frozen extractor instead (an untrained one, or a trained zsrm policy's), as on a state.
 ``--finetune-from POLICY``: SAC on the policy view whose actor's and critic's extractors start as a
 trained zsrm policy's and go on learning (the critic's from its loss, as in DrQ). Not
-resumable, no policy saved, not in ``zsrm train``: a measurement for deciding what belongs there.
+resumable, no policy saved: a measurement for deciding what belongs in ``zsrm train`` (SAC on an
+autoencoder's keypoints went there as ``--learner sac``).
 
     python probes/push_pixel_sac.py --reward oracle --steps 150000 --out results/side/rl/push_pixel_sac/oracle-0
     python probes/push_pixel_sac.py --reward oracle --keypoints-from results/rl/pilots/v3-push_close-oracle-pairs3-500k-0/policy \
@@ -30,7 +31,6 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from stable_baselines3 import SAC  # noqa: E402
-from stable_baselines3.common.vec_env import VecEnvWrapper  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from zsrm.common.files import write_json  # noqa: E402
@@ -40,6 +40,7 @@ from zsrm.rl.augment import random_shift  # noqa: E402
 from zsrm.rl.features import IMAGE_KEY, KeypointExtractor, policy_view  # noqa: E402
 from zsrm.rl.policy import PolicyBundle  # noqa: E402
 from zsrm.rl.ppo import EvalAndCheckpoint, LinearDecay, policy_act, rewarded_env  # noqa: E402
+from zsrm.rl.sac import VecKeypoints  # noqa: E402
 from zsrm.vlm import load_vlm  # noqa: E402
 
 
@@ -58,32 +59,6 @@ def shifted_buffer(pad: int, seed: int):
             return batch
 
     return ShiftedReplayBuffer
-
-
-class VecKeypoints(VecEnvWrapper):
-    """The policy view's keypoints (x, y, strength of every keypoint, :meth:`KeypointExtractor.points`)
-    read by a frozen extractor, as a flat observation: SAC then learns on them as on a state."""
-
-    def __init__(self, venv, extractor: KeypointExtractor):
-        self.extractor = extractor.eval()
-        for param in self.extractor.parameters():
-            param.requires_grad_(False)
-        space = gym.spaces.Box(-np.inf, np.inf, (extractor.points_dim,), np.float32)
-        super().__init__(venv, observation_space=space)
-
-    @torch.no_grad()
-    def convert(self, obs: dict) -> np.ndarray:
-        return self.extractor.points({k: torch.as_tensor(np.asarray(v)) for k, v in obs.items()}).numpy()
-
-    def reset(self):
-        return self.convert(self.venv.reset())
-
-    def step_wait(self):
-        obs, rewards, dones, infos = self.venv.step_wait()
-        for info in infos:
-            if "terminal_observation" in info:
-                info["terminal_observation"] = self.convert({k: v[None] for k, v in info["terminal_observation"].items()})[0]
-        return self.convert(obs), rewards, dones, infos
 
 
 def is_autoencoder(folder: str) -> bool:

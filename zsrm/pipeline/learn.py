@@ -30,16 +30,17 @@ def with_preset(options, name: str) -> TrainConfig:
 
 @dataclass
 class Train(TrainConfig):
-    """Train a policy from pixels with PPO and a reward from the goal sentence."""
+    """Train a policy from pixels with PPO (or SAC: --config sac) and a reward from the goal sentence."""
 
     out: str | None = None  # run folder (default: runs/rl/<goal>-<reward>-<seed>)
-    config: PresetName = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v3 (issue 52's learner, the default's values since 2026-12-06: less action noise, mean-action evaluation), v2 (before then), v1 (before 2026-12-04)
+    config: PresetName = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v3 (issue 52's learner, the default's values since 2026-12-06: less action noise, mean-action evaluation), v2 (before then), v1 (before 2026-12-04), sac (SAC on keypoints pretrained on random actions' frames: 64 px, 4 envs, 500k steps)
     fresh: bool = False  # start over instead of resuming the run folder's checkpoint
     device: str = "cpu"  # where the VLM trunk and PPO run: cpu, cuda, cuda:N or auto (not part of the run's config)
     env_workers: int = 0  # processes that step the scenes (0: 2 with 8+ envs and 2+ cores, else 1; the same numbers either way); give 1 when runs share the cores
 
     def run(self) -> int:
-        from zsrm.rl.ppo import auto_env_workers, train
+        from zsrm.rl.learners import train
+        from zsrm.rl.ppo import auto_env_workers
 
         cfg = with_preset(self, self.config)
         out = Path(self.out or f"runs/rl/{cfg.goal.replace(' ', '_')}-{cfg.reward}-{cfg.seed}")
@@ -49,7 +50,7 @@ class Train(TrainConfig):
         print(f"{cfg.goal} with the {cfg.reward} reward, {summary['env_steps']} env steps: oracle episode reward "
               f"{summary['final_mean']:.1f} +- {summary['final_se']:.1f}, success {summary['final_success_rate']:.2f} "
               f"over {summary['final_episodes']} episodes")
-        print(f"wrote {out}/ (policy/, eval.csv, summary.json, tb/)")
+        print(f"wrote {out}/ (policy/, eval.csv, summary.json, {'keypoints/' if cfg.learner == 'sac' else 'tb/'})")
         return 0
 
 

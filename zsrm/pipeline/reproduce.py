@@ -102,12 +102,13 @@ def demo_stages(scale: dict, vlm: str, config: str = "cpu") -> list[Stage]:
         return {"vlm": type(load_vlm(vlm)).__name__, "reward_model": type(load_reward_backbone("student")).__name__}
 
     def train_policy(folder: Path) -> dict:
-        from zsrm.rl.ppo import auto_env_workers, train
+        from zsrm.rl.learners import train
+        from zsrm.rl.ppo import auto_env_workers
 
         return _brief(train(train_cfg, folder, progress=True, env_workers=auto_env_workers(train_cfg)))
 
     def random_policy(folder: Path) -> dict:
-        from zsrm.rl.ppo import train
+        from zsrm.rl.learners import train
 
         return _brief(train(random_cfg, folder, progress=False))
 

@@ -370,12 +370,14 @@ SIDE = [
      "(3 seeds, 7 min a run); PPO 200k at 64 px then SAC 300k: 0.54 (oracle) and 0.48 (zsrm) on PPO seed 0, "
      "0.44 over the PPO stage's seeds 0-2 (oracle); with the pixel CNN at stride 2, 0.80 on PPO seed 0 and 0.52 "
      "over seeds 0-2; on a keypoint autoencoder's keypoints (no reward, no PPO stage; --anneal-lr) 0.51 (oracle) and "
-     "0.56 (zsrm) over 3 SAC seeds, at 476k SAC steps 0.70 and 0.59"),
+     "0.56 (zsrm) over 3 SAC seeds, at 476k SAC steps 0.70 and 0.59; the same learner on place_front (zsrm, "
+     "seed 0, 300k SAC steps) 0.70, where PPO reads 0.47"),
     ("side/rl/keypoint_precision*.json", "how many cm a frozen extractor's keypoints miss push_close's pusher and pucks "
      "by (probes/keypoint_precision.py): the pucks about 1 cm for all, the pusher 4-5 cm for most PPO extractors and "
      "1-3 cm for those SAC did well on, 0.5-0.9 cm trained on true places, 0.4-0.6 cm for the keypoint autoencoder "
      "with inverse dynamics"),
-    ("side/rl/keypoint_ae/*/*", "keypoint autoencoders of push_close's tilted camera trained on random-action frames "
+    ("side/rl/keypoint_ae/*/*", "keypoint autoencoders of push_close's tilted camera (place_front's front camera in "
+     "place_front/) trained on random-action frames "
      "(probes/keypoint_autoencoder.py; each training.json's meta.command): the frozen extractors SAC reads"),
 ]
 

@@ -64,6 +64,14 @@ class TrainConfig:
     augment_shift: int = 0
     """after each rollout, pull the policy and value on the pixel view shifted by up to this many
     pixels towards theirs on the view itself (DrAC's regulariser, zsrm.rl.augment); 0: off"""
+    learner: Literal["ppo", "sac"] = "ppo"
+    """ppo: PPO on the policy view, its keypoints trained with it (zsrm.rl.ppo); sac: stable-baselines3's
+    SAC on the frozen keypoints of a keypoint autoencoder pretrained on random actions' frames, whose
+    env steps count in the run's (zsrm.rl.sac, zsrm.rl.pretrain; --config sac)"""
+    pretrain_episodes: int = 320
+    """--learner sac: episodes of random actions whose frames the keypoints are pretrained on"""
+    pretrain_steps: int = 4000
+    """--learner sac: Adam steps of the keypoint autoencoder"""
     n_steps: int = 32
     """PPO rollout length per env"""
     batch_size: int = 32
@@ -153,7 +161,8 @@ class TrainConfig:
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
              "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0,
              "near_start": 0.0, "zsrm_correct_every": 0, "zsrm_correct_frames": 128,
-             "zsrm_correct_box_area": 0.0, "pair_scale": 0.0, "pixel_stride": 4}
+             "zsrm_correct_box_area": 0.0, "pair_scale": 0.0, "pixel_stride": 4, "learner": "ppo",
+             "pretrain_episodes": 320, "pretrain_steps": 4000}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
     LEGACY_DEFAULTS = {"trunk_size": 0, "pixel_size": 0, "anneal_lr": False, "log_std_init": 0.0,
@@ -165,7 +174,7 @@ class TrainConfig:
         if self.zsrm_output not in ("binary", "margin"):
             raise ValueError(f"unknown zsrm output {self.zsrm_output!r}; choose binary or margin")
         for name in ("steps", "n_envs", "action_repeat", "n_steps", "batch_size", "n_epochs", "eval_every",
-                     "eval_episodes", "checkpoint_every", "threads", "keypoints"):
+                     "eval_episodes", "checkpoint_every", "threads", "keypoints", "pretrain_episodes", "pretrain_steps"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.augment_shift < 0 or (self.augment_shift and not self.pixels):
@@ -175,10 +184,7 @@ class TrainConfig:
             from zsrm.envs.pushing import check_near_start
 
             check_near_start(self.near_start)
-        if self.pixel_stride not in (2, 4):
-            raise ValueError(f"pixel_stride is 2 or 4, got {self.pixel_stride}")
-        if self.pair_scale < 0:
-            raise ValueError(f"pair_scale must be >= 0 (0: no keypoint pairs), got {self.pair_scale}")
+        self.check_policy_settings()
         if self.lift_ceiling < 0:
             raise ValueError(f"lift_ceiling must be >= 0 (0: the workspace's top), got {self.lift_ceiling}")
         if self.zsrm_correct_every < 0 or self.zsrm_correct_frames < 1 or self.zsrm_correct_box_area < 0:
@@ -220,6 +226,21 @@ class TrainConfig:
         if 100 % self.action_repeat:
             raise ValueError(f"action_repeat must divide the 100-step episode, got {self.action_repeat}")
 
+    def check_policy_settings(self) -> None:
+        """The learner and the policy view's settings, one line each."""
+        if self.learner not in ("ppo", "sac"):
+            raise ValueError(f"unknown learner {self.learner!r}; choose ppo or sac")
+        if self.learner == "sac" and not self.pixels:
+            raise ValueError("--learner sac reads the keypoints of a pretrained pixel CNN: it needs --pixels")
+        if self.learner == "sac" and (self.reward in ("curiosity", "vice") or self.zsrm_correct_every):
+            raise ValueError(f"--learner sac trains with the oracle, zsrm, base or random reward; the {self.reward} "
+                             f"reward{' corrected online' if self.zsrm_correct_every else ''} updates between PPO's "
+                             "rollouts and has not been run with SAC")
+        if self.pixel_stride not in (2, 4):
+            raise ValueError(f"pixel_stride is 2 or 4, got {self.pixel_stride}")
+        if self.pair_scale < 0:
+            raise ValueError(f"pair_scale must be >= 0 (0: no keypoint pairs), got {self.pair_scale}")
+
     def drop_unread_settings(self) -> None:
         """Settings only one reward reads, back to their unwritten values for the others: a sweep
         shares them across rewards, and any other reward's run is the same run whatever they say."""
@@ -232,6 +253,10 @@ class TrainConfig:
         if self.reward == "random":  # uniform random actions: no policy network reads its inputs
             self.pair_scale = self.ADDED["pair_scale"]
             self.pixel_stride = self.ADDED["pixel_stride"]
+            self.learner = self.ADDED["learner"]
+        if self.learner != "sac":  # only SAC's keypoints are pretrained
+            self.pretrain_episodes = self.ADDED["pretrain_episodes"]
+            self.pretrain_steps = self.ADDED["pretrain_steps"]
         if self.reward != "vice":  # the same for VICE's classifier updates
             self.vice_update_every = self.ADDED["vice_update_every"]
             self.vice_oracle_labels = self.ADDED["vice_oracle_labels"]
@@ -325,7 +350,7 @@ def goal_relation(goal: str, scene: str | None = None) -> str | None:
 
 
 # The presets' names, as the commands take them (--config).
-PresetName = Literal["cpu", "paper", "v3", "v2", "v1"]
+PresetName = Literal["cpu", "paper", "v3", "v2", "v1", "sac"]
 # The old defaults stay by name: a committed result's command names the preset it was made with.
 SAMPLED_V2 = {"log_std_init": 0.0, "eval_deterministic": False}
 FIXED_VICE = {"vice_update_every": 0, "vice_oracle_labels": False}  # VICE's classifier fitted once
@@ -337,6 +362,9 @@ PRESETS: dict[str, dict] = {
     "v3": {"log_std_init": -1.0, "eval_deterministic": True},  # and VICE updated on oracle-labelled frames
     # the default from 2026-12-04 to 2026-12-06 (action noise 1, sampled evaluation)
     "v2": {**SAMPLED_V2, **FIXED_VICE},
+    # issue 52's off-policy learner (docs/training.md, push_close): SAC on keypoints pretrained on
+    # random actions' frames of a 64 px view, 4 envs, 500k env steps with the pretraining's
+    "sac": {"learner": "sac", "pixel_size": 64, "n_envs": 4, "steps": 500_000},
     # the default until 2026-12-04, behind the results committed before then (64 px policy views,
     # action repeat 2, 10 epochs): about a fifth of the default's speed (results/ppo_speed.json)
     "v1": {"trunk_size": 0, "pixel_size": 0, "action_repeat": 2, "n_epochs": 10, "batch_size": 128, "n_envs": 8,

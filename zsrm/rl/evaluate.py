@@ -112,7 +112,7 @@ def rollout(policy: str | Path, episodes: int = 10, seed: int = 0, spread: str =
     GIF of the first episode. ``deterministic``: play the policy's mean action (True) or sample
     it (False); None: as its run evaluated it (``eval_deterministic``)."""
     from zsrm.rl.features import policy_view
-    from zsrm.rl.policy import PolicyBundle
+    from zsrm.rl.policy import load_policy
     from zsrm.vlm import load_vlm
 
     if isinstance(policy, str) and policy.startswith("random:"):
@@ -123,7 +123,7 @@ def rollout(policy: str | Path, episodes: int = 10, seed: int = 0, spread: str =
     else:
         if scene:
             raise ValueError("--scene is for random:GOAL; a trained policy's folder names its scene")
-        bundle = PolicyBundle.load(policy)
+        bundle = load_policy(policy)
         cfg, vlm = bundle.cfg, load_vlm(bundle.cfg.vlm)
 
         mean_action = cfg.eval_deterministic if deterministic is None else deterministic

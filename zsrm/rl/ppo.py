@@ -158,13 +158,11 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     from stable_baselines3.common.logger import configure
     from tqdm import tqdm
 
-    torch.set_num_threads(cfg.threads)
-    (out := Path(out)).mkdir(parents=True, exist_ok=True)
-    if (out / "summary.json").is_file() and not fresh:
-        summary = read_json(out / "summary.json", "a zsrm train summary")
-        if summary.get("config", {}) == cfg.to_dict():
-            return summary  # finished run: nothing to do
-    write_json(out / "config.json", cfg.to_dict())
+    if cfg.learner != "ppo" and cfg.reward != "random":
+        raise ValueError(f"a --learner {cfg.learner} run is trained by zsrm.rl.learners.train, not PPO's")
+    out = Path(out)
+    if (summary := finished(cfg, out, fresh)) is not None:
+        return summary
     if cfg.reward == "random":
         return finish_random(cfg, out)
 
@@ -207,6 +205,19 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     PolicyBundle(model.policy, cfg).save(out / "policy")
     return write_summary(cfg, out, by_actions["mean" if cfg.eval_deterministic else "sampled"], rows,
                          callback.env_steps(), wall_s=time.time() - callback.t0, by_actions=by_actions)
+
+
+def finished(cfg: TrainConfig, out: Path, fresh: bool = False) -> dict | None:
+    """A finished run's summary when ``out`` holds one of ``cfg`` (and not ``fresh``); else None,
+    with the run's threads set, its folder made and its config.json written."""
+    torch.set_num_threads(cfg.threads)
+    out.mkdir(parents=True, exist_ok=True)
+    if (out / "summary.json").is_file() and not fresh:
+        summary = read_json(out / "summary.json", "a zsrm train summary")
+        if summary.get("config", {}) == cfg.to_dict():
+            return summary  # finished run: nothing to do
+    write_json(out / "config.json", cfg.to_dict())
+    return None
 
 
 def auxiliary_losses(cfg: TrainConfig, model: PPO, device: str) -> dict:

@@ -84,7 +84,7 @@ def run_trial(trial: dict) -> dict:
     import torch
     from ray import tune
 
-    from zsrm.rl.ppo import train
+    from zsrm.rl.learners import train
 
     torch.set_num_threads(1)
     if os.path.isdir(trial["cwd"]):  # Ray Tune runs a trial in a folder of its own: relative paths are the sweep's
