@@ -34,14 +34,15 @@ KIND = "zsrm-keypoints"
 FRAME_ENVS = 8  # envs stepped side by side while the random frames are collected
 
 
-def random_frames(cfg: TrainConfig, episodes: int, envs: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def random_frames(cfg: TrainConfig, episodes: int, envs: int, seed: int,
+                  progress: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Goal-camera frames (N, side, side, 3) of uniform random actions in ``cfg``'s scenes, each
     frame's episode and the action taken after it (NaN after an episode's last frame). Every env
     restarts when the first one's episode ends."""
     venv, camera = make_vec(cfg, envs, seed), goal_camera(cfg.goal, cfg.scene)
     rng = np.random.default_rng(seed)
     frames, episode, actions = [], [], []
-    for e in tqdm(range(0, episodes, envs), desc="frames", unit="episode", unit_scale=envs):
+    for e in tqdm(range(0, episodes, envs), desc="frames", unit="episode", unit_scale=envs, disable=not progress):
         obs = venv.reset()
         for _ in range(cfg.episode_decisions):
             action = rng.uniform(-1, 1, (envs, *venv.action_space.shape)).astype(np.float32)
@@ -140,7 +141,7 @@ def pretrain_keypoints(cfg: TrainConfig, space, folder: str | Path, progress: bo
     start = time.time()
     torch.manual_seed(cfg.seed)
     frame_cfg = dataclasses.replace(cfg, reward="oracle")  # the frames' scenes; no reward is read
-    images, episode, actions = random_frames(frame_cfg, cfg.pretrain_episodes, FRAME_ENVS, cfg.seed)
+    images, episode, actions = random_frames(frame_cfg, cfg.pretrain_episodes, FRAME_ENVS, cfg.seed, progress)
     frames = torch.as_tensor(shrink_frames(images, cfg.pixel_size))
     model = KeypointAutoencoder(cfg.pixel_size, PIXEL_KEYPOINTS, cfg.pixel_stride)
     losses = train_autoencoder(model, frames, episode, actions, FRAME_ENVS, cfg.pretrain_steps, 32, 1.0, cfg.seed,
