@@ -4,11 +4,12 @@ The keypoint precision probe (``probes/keypoint_precision.py``) finds the pucks 
 by every extractor (the VLM trunk locates coloured objects), but the pusher, which only the pixel
 CNN sees, to 2-5 cm by PPO-trained extractors, against 0.5-0.9 cm for the same architecture trained
 on true places. This probe trains the pixel CNN (zsrm's ``PixelKeypoints``) as the encoder of a
-keypoint autoencoder (``zsrm.rl.pretrain``, which ``zsrm train --learner sac`` runs), on frames of random actions alone (after Jakab et al. 2018): a frame is
-rebuilt from another frame of its episode (appearance) and its own keypoints, drawn as Gaussian
-blobs (geometry), so the keypoints must follow what moves; ``--inverse-weight`` adds zsrm's
-inverse-dynamics loss (the random action from two consecutive frames' keypoints). It saves a frozen extractor (zsrm's
-``KeypointExtractor``: the VLM branch untrained, the pixel branch the encoder) for
+keypoint autoencoder (``zsrm.rl.pretrain``, which ``zsrm train --learner sac`` runs), on frames
+of random actions alone (after Jakab et al. 2018): a frame is rebuilt from another frame of its
+episode (appearance) and its own keypoints, drawn as Gaussian blobs (geometry), so the keypoints
+must follow what moves; ``--inverse-weight`` adds zsrm's inverse-dynamics loss (the random action
+from two consecutive frames' keypoints). It saves a frozen extractor (zsrm's ``KeypointExtractor``:
+the VLM branch untrained, the pixel branch the encoder) for
 ``keypoint_precision.py`` and ``push_pixel_sac.py --keypoints-from``.
 
     python probes/keypoint_autoencoder.py --out runs/keypoint-ae/push_close
@@ -28,8 +29,9 @@ import torch  # noqa: E402
 from zsrm.common.files import write_json  # noqa: E402
 from zsrm.rl.config import TrainConfig  # noqa: E402
 from zsrm.rl.envs import make_vec  # noqa: E402
-from zsrm.rl.features import KeypointExtractor, policy_view, shrink_frames  # noqa: E402
-from zsrm.rl.pretrain import KeypointAutoencoder, gaussian_maps, random_frames, train_autoencoder  # noqa: E402,F401
+from zsrm.rl.features import policy_view, shrink_frames  # noqa: E402
+from zsrm.rl.pretrain import (KeypointAutoencoder, gaussian_maps, keypoint_extractor, random_frames,  # noqa: E402,F401
+                               train_autoencoder)
 from zsrm.vlm import load_vlm  # noqa: E402
 
 EXTRACTOR = "extractor.pt"
@@ -57,17 +59,18 @@ def main(argv=None):
     out, start = Path(args.out), time.time()
     out.mkdir(parents=True, exist_ok=True)
     envs = 8
-    images, episode, actions = random_frames(TrainConfig(goal=args.goal, reward="oracle"), args.episodes, envs, args.seed)
+    frame_cfg = TrainConfig(goal=args.goal, reward="oracle")
+    images, episode, actions = random_frames(frame_cfg, args.episodes, envs, args.seed)
     frames = torch.as_tensor(shrink_frames(images, args.pixel_size))
     model = KeypointAutoencoder(args.pixel_size, 16, args.pixel_stride, args.sigma)
-    losses = train_autoencoder(model, frames, episode, actions, envs, args.steps, args.batch_size, args.inverse_weight, args.seed,
-                   args.any_source)
+    losses = train_autoencoder(model, frames, episode, actions, envs, args.steps, args.batch_size, args.inverse_weight,
+                               args.seed, args.any_source)
     # the extractor a SAC run reads: an untrained VLM branch (seeded) beside the trained pixel branch
     cfg = TrainConfig(goal=args.goal, pixel_size=args.pixel_size, pixel_stride=args.pixel_stride)
     venv = make_vec(cfg, 1, args.seed)
     space = policy_view(venv, load_vlm(cfg.vlm), cfg).observation_space
     venv.close()
-    extractor = KeypointExtractor(space, keypoints=cfg.keypoints, pixels=True, pixel_stride=args.pixel_stride)
+    extractor = keypoint_extractor(space, cfg.keypoints, args.pixel_stride)
     extractor.pixels.load_state_dict(model.keypoints.state_dict())
     torch.save({"state_dict": extractor.state_dict(), "settings": {"pixel_size": args.pixel_size,
                 "pixel_stride": args.pixel_stride, "keypoints": cfg.keypoints}}, out / EXTRACTOR)
@@ -86,8 +89,7 @@ def load_extractor(folder: str | Path, space, settings_only: bool = False):
     settings = saved["settings"]
     if settings_only:
         return settings
-    extractor = KeypointExtractor(space, keypoints=settings["keypoints"], pixels=True,
-                                  pixel_stride=settings["pixel_stride"])
+    extractor = keypoint_extractor(space, settings["keypoints"], settings["pixel_stride"])
     extractor.load_state_dict(saved["state_dict"])
     return extractor.eval(), settings
 

@@ -285,7 +285,8 @@ def test_the_keypoint_autoencoder_rebuilds_half_the_frame_and_learns(tmp_path, m
 
 
 def test_the_autoencoders_random_frames_pair_each_action_with_its_envs_next_frame():
-    frames, episode, actions = probe("keypoint_autoencoder.py")["random_frames"](TrainConfig(goal="push_close", reward="oracle"), 4, 2, 0)
+    random_frames = probe("keypoint_autoencoder.py")["random_frames"]
+    frames, episode, actions = random_frames(TrainConfig(goal="push_close", reward="oracle"), 4, 2, 0)
     assert len(frames) == len(episode) == len(actions) and actions.shape[1] == 2
     ends = np.isnan(actions).any(axis=1)
     assert ends[-2:].all()  # the last step of the envs' episodes leads to no frame of theirs

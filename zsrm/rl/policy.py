@@ -23,7 +23,7 @@ from zsrm.common.registry import WEIGHTS_FILE, build_model, folder_kind, load_we
 from zsrm.common.registry import save_weights as save_module_weights
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.features import FEATURES_KEY, IMAGE_KEY, KeypointExtractor
-from zsrm.rl.pretrain import freeze, frozen_extractor
+from zsrm.rl.pretrain import freeze, keypoint_extractor, points_of
 from zsrm.rl.resume import read_resume
 
 KIND = "zsrm-policy"
@@ -105,7 +105,7 @@ class SacPolicyBundle:
         cfg = config.config
 
         def make():
-            extractor = frozen_extractor(view_space(config.observation_shape, config.image_size), cfg.keypoints,
+            extractor = keypoint_extractor(view_space(config.observation_shape, config.image_size), cfg.keypoints,
                                          cfg.pixel_stride)
             return nn.ModuleDict({"extractor": extractor, "actor": sac_actor(extractor.points_dim, config.action_dim)})
 
@@ -116,8 +116,7 @@ class SacPolicyBundle:
     @torch.no_grad()
     def act(self, observation: dict, deterministic: bool = True) -> np.ndarray:
         """Actions ``(N, action_dim)`` for a batch of policy views."""
-        points = self.extractor.points({k: torch.as_tensor(np.asarray(v)) for k, v in observation.items()})
-        return self.actor(points, deterministic=deterministic).numpy()
+        return self.actor(points_of(self.extractor, observation), deterministic=deterministic).numpy()
 
 
 def sac_actor(points_dim: int, action_dim: int) -> nn.Module:

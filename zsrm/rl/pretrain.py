@@ -32,6 +32,8 @@ from zsrm.rl.goals import goal_camera
 
 KIND = "zsrm-keypoints"
 FRAME_ENVS = 8  # envs stepped side by side while the random frames are collected
+# keypoints of the pixel CNN (KeypointExtractor's pixel branch; the VLM branch has cfg.keypoints)
+PIXEL_KEYPOINTS = 16
 
 
 def random_frames(cfg: TrainConfig, episodes: int, envs: int, seed: int,
@@ -133,11 +135,7 @@ def pretrain_keypoints(cfg: TrainConfig, space, folder: str | Path, progress: bo
     (rebuild + inverse dynamics, half the sources from any episode; seeded by ``cfg.seed``)."""
     folder = Path(folder)
     if (folder / "config.json").is_file():
-        made_for = read_config(folder, kind=KIND)["run"]
-        if made_for != cfg.identity():
-            raise ValueError(f"the keypoints in {folder} were pretrained for a run with other settings; pass --fresh "
-                             "to start over or use another --out")
-        return load_keypoints(folder, space)
+        return load_keypoints(folder, space, run=cfg.identity())
     start = time.time()
     torch.manual_seed(cfg.seed)
     frame_cfg = dataclasses.replace(cfg, reward="oracle")  # the frames' scenes; no reward is read
@@ -146,7 +144,7 @@ def pretrain_keypoints(cfg: TrainConfig, space, folder: str | Path, progress: bo
     model = KeypointAutoencoder(cfg.pixel_size, PIXEL_KEYPOINTS, cfg.pixel_stride)
     losses = train_autoencoder(model, frames, episode, actions, FRAME_ENVS, cfg.pretrain_steps, 32, 1.0, cfg.seed,
                                any_source=0.5, progress=progress)
-    extractor = frozen_extractor(space, cfg.keypoints, cfg.pixel_stride)
+    extractor = keypoint_extractor(space, cfg.keypoints, cfg.pixel_stride)
     extractor.pixels.load_state_dict(model.keypoints.state_dict())
     env_steps = len(frames) * cfg.action_repeat
     save_folder(folder, {"kind": KIND, "run": cfg.identity(), "keypoints": cfg.keypoints, "pixel_size": cfg.pixel_size,
@@ -156,11 +154,8 @@ def pretrain_keypoints(cfg: TrainConfig, space, folder: str | Path, progress: bo
     return freeze(extractor), env_steps
 
 
-# keypoints of the pixel CNN (KeypointExtractor's pixel branch; the VLM branch has cfg.keypoints)
-PIXEL_KEYPOINTS = 16
-
-
-def frozen_extractor(space, keypoints: int, pixel_stride: int) -> KeypointExtractor:
+def keypoint_extractor(space, keypoints: int, pixel_stride: int) -> KeypointExtractor:
+    """An untrained extractor of the pretrained ones' shape (``PIXEL_KEYPOINTS`` in its pixel branch)."""
     return KeypointExtractor(space, keypoints=keypoints, pixels=True, pixel_stride=pixel_stride)
 
 
@@ -170,11 +165,21 @@ def freeze(extractor: KeypointExtractor) -> KeypointExtractor:
     return extractor.eval()
 
 
-def load_keypoints(folder: str | Path, space) -> tuple[KeypointExtractor, int]:
-    """A pretrained folder's frozen extractor for a policy view of ``space``, and its env steps."""
+@torch.no_grad()
+def points_of(extractor: KeypointExtractor, observation: dict) -> torch.Tensor:
+    """The keypoints (:meth:`KeypointExtractor.points`) of a batch of policy views given as arrays."""
+    return extractor.points({k: torch.as_tensor(np.asarray(v)) for k, v in observation.items()})
+
+
+def load_keypoints(folder: str | Path, space, run: dict | None = None) -> tuple[KeypointExtractor, int]:
+    """A pretrained folder's frozen extractor for a policy view of ``space``, and its env steps;
+    with ``run`` (a config's identity), refused when pretrained for a run of other settings."""
     config = read_config(folder, kind=KIND, schema={
         "kind": str, "run": dict, "keypoints": int, "pixel_size": int, "pixel_stride": int, "env_steps": int,
         "frames": int, "loss_first_100": float, "loss_last_100": float, "wall_s": float})
-    extractor = build_model(folder, lambda: frozen_extractor(space, config.keypoints, config.pixel_stride))
+    if run is not None and config.run != run:
+        raise ValueError(f"the keypoints in {folder} were pretrained for a run with other settings; pass --fresh "
+                         "to start over or use another --out")
+    extractor = build_model(folder, lambda: keypoint_extractor(space, config.keypoints, config.pixel_stride))
     load_weights(extractor, folder)
     return freeze(extractor), config.env_steps

@@ -33,7 +33,7 @@ from zsrm.rl.evaluate import Evaluator
 from zsrm.rl.features import KeypointExtractor, policy_view
 from zsrm.rl.policy import SAC_NET_ARCH, SacPolicyBundle
 from zsrm.rl.ppo import FINAL_EPISODES, EvalAndCheckpoint, final_evaluations, learning_rate, rewarded_env, write_summary
-from zsrm.rl.pretrain import freeze, pretrain_keypoints
+from zsrm.rl.pretrain import freeze, points_of, pretrain_keypoints
 from zsrm.vlm import load_vlm
 
 # SAC's settings, stable-baselines3's defaults but these (measured on push_close, docs/training.md)
@@ -51,9 +51,8 @@ class VecKeypoints(VecEnvWrapper):
         space = gym.spaces.Box(-np.inf, np.inf, (extractor.points_dim,), np.float32)
         super().__init__(venv, observation_space=space)
 
-    @torch.no_grad()
     def convert(self, obs: dict) -> np.ndarray:
-        return self.extractor.points({k: torch.as_tensor(np.asarray(v)) for k, v in obs.items()}).numpy()
+        return points_of(self.extractor, obs).numpy()
 
     def reset(self):
         return self.convert(self.venv.reset())
