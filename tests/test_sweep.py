@@ -110,3 +110,25 @@ def test_settings_reach_every_trial_and_the_recorded_command():
     assert "--settings zsrm-correct-every=5000 gamma=0.99" in command and "--root runs/x" in command
     with pytest.raises(ValueError, match="KEY=VALUE with KEY a zsrm train setting"):
         Sweep(settings=("no-such-setting=1",)).overrides()
+
+
+def test_the_per_task_preset_gives_each_task_its_own_learner():
+    from zsrm.pipeline.learn import Sweep, Train, with_preset
+
+    sweep = Sweep(config="per-task", tasks=("push_close", "place_between", "place_behind", "stack"),
+                  rewards=("zsrm", "oracle"), seeds=(0,))
+    configs = {t["name"]: t["config"] for t in sweep.trials()}
+    assert configs["push_close-zsrm-0"]["learner"] == "sac" and configs["push_close-zsrm-0"]["steps"] == 500_000
+    assert configs["place_between-zsrm-0"]["zsrm_correct_every"] == 10_000
+    assert "zsrm_correct_every" not in configs["place_between-oracle-0"]  # only the zsrm reward is corrected
+    assert configs["place_behind-oracle-0"]["steps"] == 500_000 and "learner" not in configs["place_behind-oracle-0"]
+    assert configs["stack-zsrm-0"] == Sweep(tasks=("stack",), rewards=("zsrm",), seeds=(0,)).trials()[0]["config"]
+    assert "--steps" not in sweep.meta(1, 8)["command"]  # each task's budget is the preset's
+    tiny = {t["name"]: t["config"]["steps"] for t in Sweep(config="per-task", tasks=("push_close", "stack"),
+                                                           rewards=("oracle",), seeds=(0,), steps=2048).trials()}
+    assert tiny == {"push_close-oracle-0": 2048, "stack-oracle-0": 2048}  # a budget given holds for every task
+    # zsrm train --config per-task reads the goal's entry; a setting given on the command line wins
+    assert with_preset(Train(goal="push_close"), "per-task").learner == "sac"
+    assert with_preset(Train(goal="place_front", reward="zsrm", zsrm_correct_every=5000),
+                       "per-task").zsrm_correct_every == 5000
+    assert with_preset(Train(goal="stack"), "per-task") == with_preset(Train(goal="stack"), "cpu")

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Literal
 
 from zsrm.common.files import check_writable, write_json
-from zsrm.rl.config import PRESETS, REWARDS, PresetName, TrainConfig
+from zsrm.rl.config import REWARDS, PresetName, TrainConfig, preset_settings
 from zsrm.tasks.catalogue import LEARNING_TASKS
 
 
@@ -22,7 +22,7 @@ def with_preset(options, name: str) -> TrainConfig:
     """The TrainConfig of ``options``; a preset's value fills each field left at its default."""
     defaults = TrainConfig()
     values = {f.name: getattr(options, f.name) for f in dataclasses.fields(TrainConfig)}
-    for key, value in PRESETS[name].items():
+    for key, value in preset_settings(name, options.goal).items():
         if values[key] == getattr(defaults, key):
             values[key] = value
     return TrainConfig(**values)
@@ -33,7 +33,7 @@ class Train(TrainConfig):
     """Train a policy from pixels with PPO (or SAC: --config sac) and a reward from the goal sentence."""
 
     out: str | None = None  # run folder (default: runs/rl/<goal>-<reward>-<seed>)
-    config: PresetName = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v3 (issue 52's learner, the default's values since 2026-12-06: less action noise, mean-action evaluation), v2 (before then), v1 (before 2026-12-04), sac (SAC on keypoints pretrained on random actions' frames: 64 px, 4 envs, 500k steps)
+    config: PresetName = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v3 (issue 52's learner, the default's values since 2026-12-06: less action noise, mean-action evaluation), v2 (before then), v1 (before 2026-12-04), sac (SAC on keypoints pretrained on random actions' frames: 64 px, 4 envs, 500k steps), per-task (issue 52's learner per task: sac for push_close, 500k steps and the online correction for place_between and place_front, 500k for place_behind, else the default)
     fresh: bool = False  # start over instead of resuming the run folder's checkpoint
     device: str = "cpu"  # where the VLM trunk and PPO run: cpu, cuda, cuda:N or auto (not part of the run's config)
     env_workers: int = 0  # processes that step the scenes (0: 2 with 8+ envs and 2+ cores, else 1; the same numbers either way); give 1 when runs share the cores
@@ -118,7 +118,7 @@ class Sweep:
     rewards: tuple[str, ...] = ("oracle", "zsrm", "random")  # rewards, of: oracle, zsrm, base, vice, curiosity, random
     seeds: tuple[int, ...] = (0, 1, 2)  # seeds per task and reward
     root: str = "runs/rl"  # one folder per trial under here (shared storage on a cluster)
-    steps: int = 300_000  # env steps per trial
+    steps: int | None = None  # env steps per trial (default: the preset's for the task, else 300k)
     num_cpus: int = 2  # CPUs of the local Ray (one trial per CPU)
     address: str | None = None  # a Ray cluster to join instead (auto, or ray://HOST:PORT)
     reward_model: str = "student"  # the zsrm reward's model folder, or student (the shipped one)
@@ -126,7 +126,7 @@ class Sweep:
     gather_only: bool = False  # train nothing: gather the trials finished so far (e.g. while a sweep runs)
     vlm: str = "scene"  # the VLM whose image trunk the policies read (a folder pretrained by zsrm pretrain-vlm)
     init_root: str | None = None  # start each trial from the policy of the trial of its name under here
-    config: PresetName = "cpu"  # TrainConfig preset of every trial (cpu, the default: v3, issue 52's learner, since 2026-12-06; v2: before then; v1: before 2026-12-04)
+    config: PresetName = "cpu"  # TrainConfig preset of every trial (cpu, the default: v3, issue 52's learner, since 2026-12-06; v2: before then; v1: before 2026-12-04; sac; per-task: each task's own, as zsrm train --config per-task)
     scene: str | None = None  # your own scene (module:Class or a registered id) whose objects --tasks name (docs/own-scene.md)
     settings: tuple[str, ...] = ()  # other TrainConfig settings of every trial, KEY=VALUE each as zsrm train takes them (gamma=0.99 zsrm-correct-every=5000)
     train: dict = field(default_factory=dict, metadata={"cli": False})  # other TrainConfig settings (tiny scales)
@@ -142,7 +142,7 @@ class Sweep:
         check_writable(self.out)
         out = Path(self.out)
         if not self.gather_only:
-            ran = sweep(self.root, self.tasks, self.rewards, self.seeds, self.overrides(), num_cpus=self.num_cpus,
+            ran = sweep(self.root, self.tasks, self.rewards, self.seeds, self.overrides, num_cpus=self.num_cpus,
                         address=self.address, kept=out.parent / "trials", init_root=self.init_root)
             print(f"ran {len(ran)} trial(s); the others were finished already")
         trials = self.trials()
@@ -159,20 +159,18 @@ class Sweep:
         print(f"wrote {out} and {out.with_suffix('.png')}")
         return 0
 
-    def overrides(self) -> dict:
-        """The TrainConfig settings every trial shares."""
+    def overrides(self, task: str | None = None) -> dict:
+        """The TrainConfig settings of ``task``'s trials (the preset's for the task, then the command's)."""
         # A model folder by its absolute path: Ray Tune runs each trial in its own working directory.
-        if self.config not in PRESETS:
-            raise ValueError(f"unknown config {self.config!r}; choose one of {', '.join(PRESETS)}")
-        return {**PRESETS[self.config], **parse_settings(self.settings), **self.train, "steps": self.steps,
-                "reward_model": absolute_if_folder(self.reward_model),
+        return {**preset_settings(self.config, task), **parse_settings(self.settings), **self.train,
+                **({"steps": self.steps} if self.steps else {}), "reward_model": absolute_if_folder(self.reward_model),
                 "vlm": absolute_if_folder(self.vlm), **({"scene": self.scene} if self.scene else {})}
 
     def trials(self) -> list[dict]:
         """The sweep's trials: name and TrainConfig (as a dict) of each."""
         from zsrm.rl.sweep import trial_grid
 
-        return trial_grid(self.tasks, self.rewards, self.seeds, self.overrides(), self.init_root)
+        return trial_grid(self.tasks, self.rewards, self.seeds, self.overrides, self.init_root)
 
     def meta(self, finished: int, planned: int) -> dict:
         return {"trials_finished": finished, "trials_planned": planned,
@@ -181,7 +179,8 @@ class Sweep:
                           + ("; pendulum: the oracle episode return, the env's reward summed over an episode of at "
                              "most 100 control steps" if "pendulum" in self.tasks else ""),
                 "command": f"zsrm sweep --tasks {shlex.join(self.tasks)} --rewards {' '.join(self.rewards)} "
-                           f"--seeds {' '.join(map(str, self.seeds))} --steps {self.steps} --out {self.out}"
+                           f"--seeds {' '.join(map(str, self.seeds))}" + (f" --steps {self.steps}" if self.steps else "")
+                           + f" --out {self.out}"
                            + (f" --config {self.config}" if self.config != "cpu" else "")
                            + (f" --settings {shlex.join(self.settings)}" if self.settings else "")
                            + (f" --root {self.root}" if self.root != "runs/rl" else "")

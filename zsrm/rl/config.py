@@ -350,7 +350,7 @@ def goal_relation(goal: str, scene: str | None = None) -> str | None:
 
 
 # The presets' names, as the commands take them (--config).
-PresetName = Literal["cpu", "paper", "v3", "v2", "v1", "sac"]
+PresetName = Literal["cpu", "paper", "v3", "v2", "v1", "sac", "per-task"]
 # The old defaults stay by name: a committed result's command names the preset it was made with.
 SAMPLED_V2 = {"log_std_init": 0.0, "eval_deterministic": False}
 FIXED_VICE = {"vice_update_every": 0, "vice_oracle_labels": False}  # VICE's classifier fitted once
@@ -372,8 +372,31 @@ PRESETS: dict[str, dict] = {
 }
 
 
-def preset(name: str, **overrides) -> TrainConfig:
+# Presets whose settings depend on the task; a task left out takes the default's (v3, 300k env steps).
+TASK_PRESETS: dict[str, dict[str, dict]] = {
+    # issue 52's learner per task (docs/training.md), at most 500k env steps: SAC for the push, the
+    # online correction where the student is fooled, a longer budget where PPO was still learning
+    "per-task": {
+        "push_close": PRESETS["sac"],
+        "place_between": {"steps": 500_000, "zsrm_correct_every": 10_000},
+        "place_front": {"steps": 500_000, "zsrm_correct_every": 10_000},
+        "place_behind": {"steps": 500_000},
+    },
+}
+PRESETS["per-task"] = {}
+
+
+def preset_settings(name: str, goal: str | None = None) -> dict:
+    """The settings of preset ``name`` for ``goal`` (a catalogue task; the per-task presets read it).
+
+    >>> preset_settings("per-task", "push_close")["learner"], preset_settings("per-task", "stack")
+    ('sac', {})
+    """
     if name not in PRESETS:
         raise ValueError(f"unknown config {name!r}; choose one of {', '.join(PRESETS)}")
+    return {**PRESETS[name], **TASK_PRESETS.get(name, {}).get(goal, {})}
+
+
+def preset(name: str, **overrides) -> TrainConfig:
     # built anew, not replaced from a default: the default's resolved settings (start) follow its goal
-    return TrainConfig(**{**PRESETS[name], **overrides})
+    return TrainConfig(**{**preset_settings(name, overrides.get("goal", TrainConfig.goal)), **overrides})

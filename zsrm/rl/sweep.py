@@ -33,6 +33,7 @@ import socket
 import time
 import uuid
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -49,21 +50,24 @@ def trial_name(task: str, reward: str, seed: int) -> str:
     return f"{re.sub(r'[^A-Za-z0-9_]+', '_', task.strip())}-{reward}-{seed}"
 
 
-def trial_grid(tasks, rewards, seeds, overrides: dict | None = None, init_root: str | None = None) -> list[dict]:
+def trial_grid(tasks, rewards, seeds, overrides: dict | Callable[[str], dict] | None = None,
+               init_root: str | None = None) -> list[dict]:
     """One trial per task x reward x seed that the task takes (the pendulum takes no zsrm or vice
-    reward): its name and its TrainConfig as a dict. Seed-major, so a sweep cut short has every
-    task and reward on its first seeds. ``init_root``: each trial starts from the policy of the
-    trial of its name there (``<init_root>/<name>/policy``, TrainConfig's ``init``)."""
+    reward): its name and its TrainConfig as a dict. ``overrides``: TrainConfig settings of every
+    trial, or a function of the task giving its trials' (a per-task preset). Seed-major, so a sweep
+    cut short has every task and reward on its first seeds. ``init_root``: each trial starts from the
+    policy of the trial of its name there (``<init_root>/<name>/policy``, TrainConfig's ``init``)."""
+    settings_of = overrides if callable(overrides) else (lambda task: overrides or {})
     trials = []
-    scene = (overrides or {}).get("scene")  # an own scene's goals: TrainConfig refuses a reward it cannot take
     for seed in seeds:
         for task in tasks:
-            for reward in rewards:
-                if not scene and not takes_reward(task, reward):
+            settings = settings_of(task)
+            for reward in rewards:  # an own scene's goals: TrainConfig refuses a reward it cannot take
+                if not settings.get("scene") and not takes_reward(task, reward):
                     continue
                 name = trial_name(task, reward, seed)
                 init = {"init": str(Path(init_root) / name / "policy")} if init_root else {}
-                cfg = TrainConfig(**{**(overrides or {}), **init, "goal": task, "reward": reward, "seed": int(seed)})
+                cfg = TrainConfig(**{**settings, **init, "goal": task, "reward": reward, "seed": int(seed)})
                 trials.append({"name": name, "config": cfg.to_dict()})
     return trials
 
@@ -118,8 +122,8 @@ def record_attempt(folder: Path) -> dict:
     return line
 
 
-def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | None = None, num_cpus: int = 2,
-          address: str | None = None, cpus_per_trial: float = 1.0, kept: str | Path | None = None,
+def sweep(root: str | Path, tasks, rewards, seeds, overrides: dict | Callable[[str], dict] | None = None,
+          num_cpus: int = 2, address: str | None = None, cpus_per_trial: float = 1.0, kept: str | Path | None = None,
           init_root: str | None = None, max_failures: int = 3) -> list[str]:
     """Run every unfinished trial of the grid on Ray Tune; returns the names that ran. A trial
     is finished when its run folder under ``root``, or its kept summary ``kept/<name>.json``
