@@ -109,6 +109,31 @@ def test_keypoints_pretrained_for_other_settings_are_refused(finished, tmp_path)
         train(tiny(1600, seed=1), again, progress=False)
 
 
+def test_runs_that_differ_only_in_their_reward_share_one_pretraining(finished, tmp_path, monkeypatch):
+    import zsrm.rl.pretrain as pretrain
+    from zsrm.rl.policy import load_policy
+
+    out, _ = finished
+    space = load_policy(out / "policy").extractor._observation_space
+    shared = tmp_path / "shared"
+    first, steps = pretrain.pretrain_keypoints(tiny(1600), space, tmp_path / "oracle", progress=False, shared=shared)
+    own, _ = pretrain.load_keypoints(out / "keypoints", space)  # the run pretrained alone: the same weights
+    (kept,) = shared.iterdir()
+
+    def boom(*args, **kwargs):
+        raise AssertionError("pretrained again")
+
+    monkeypatch.setattr(pretrain, "train_autoencoder", boom)
+    base = tiny(1600, reward="base")
+    second, again = pretrain.pretrain_keypoints(base, space, tmp_path / "base", progress=False, shared=shared)
+    assert again == steps and list(shared.iterdir()) == [kept]
+    for a, b, c in zip(first.state_dict().values(), second.state_dict().values(), own.state_dict().values()):
+        assert torch.equal(a, b) and torch.equal(a, c)
+    assert json.loads((tmp_path / "base" / "config.json").read_text())["run"] == base.identity()
+    with pytest.raises(AssertionError, match="pretrained again"):  # another seed is other frames
+        pretrain.pretrain_keypoints(tiny(1600, seed=1), space, tmp_path / "seed1", progress=False, shared=shared)
+
+
 def test_sac_refuses_the_rewards_that_update_between_ppos_rollouts():
     for reward in ("curiosity", "vice"):
         with pytest.raises(ValueError, match="--learner sac"):

@@ -11,9 +11,10 @@ from zsrm.rl.config import TrainConfig
 
 
 def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool = True, on_eval=None,
-          device: str = "cpu", env_workers: int = 1) -> dict:
+          device: str = "cpu", env_workers: int = 1, shared_keypoints: str | Path | None = None) -> dict:
     """Train (or resume) one run with its learner; the summary (``out/summary.json``). The
-    arguments are :func:`zsrm.rl.ppo.train`'s."""
+    arguments are :func:`zsrm.rl.ppo.train`'s; ``shared_keypoints``: a folder where SAC runs that
+    differ only in their reward share their keypoints' pretraining (:func:`zsrm.rl.pretrain.pretrain_keypoints`)."""
     import zsrm.rl.ppo as ppo
 
     if cfg.learner == "ppo" or cfg.reward == "random":
@@ -23,4 +24,5 @@ def train(cfg: TrainConfig, out: str | Path, fresh: bool = False, progress: bool
     out = Path(out)
     if (summary := ppo.finished(cfg, out, fresh)) is not None:
         return summary
-    return train_sac(cfg, out, fresh, progress, on_eval, ppo.resolve_device(device), int(env_workers))
+    return train_sac(cfg, out, fresh, progress, on_eval, ppo.resolve_device(device), int(env_workers),
+                     None if shared_keypoints is None else Path(shared_keypoints))

@@ -15,6 +15,8 @@ pixel branch is the encoder; its VLM branch is untrained, seeded).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import time
 from pathlib import Path
 
@@ -128,14 +130,24 @@ def train_autoencoder(model: KeypointAutoencoder, frames: torch.Tensor, episode:
     return losses
 
 
-def pretrain_keypoints(cfg: TrainConfig, space, folder: str | Path, progress: bool = True) -> tuple[KeypointExtractor, int]:
+def pretrain_keypoints(cfg: TrainConfig, space, folder: str | Path, progress: bool = True,
+                       shared: str | Path | None = None) -> tuple[KeypointExtractor, int]:
     """The frozen extractor a ``--learner sac`` run reads on its policy view ``space``, and the env
     steps its frames took: loaded from ``folder`` when a run made it there, else pretrained there on
     ``cfg.pretrain_episodes`` episodes of random actions for ``cfg.pretrain_steps`` Adam steps
-    (rebuild + inverse dynamics, half the sources from any episode; seeded by ``cfg.seed``)."""
+    (rebuild + inverse dynamics, half the sources from any episode; seeded by ``cfg.seed``).
+
+    ``shared``: a folder where runs that differ only in their reward share their pretraining (a
+    sweep's): no reward is read, so the oracle and zsrm runs of one goal and seed pretrain the same
+    weights; the first to finish keeps them there (``shared/<key>``) and later ones copy them."""
     folder = Path(folder)
     if (folder / "config.json").is_file():
         return load_keypoints(folder, space, run=cfg.identity())
+    kept = Path(shared) / pretraining_key(cfg) if shared is not None else None
+    if kept is not None and (kept / "config.json").is_file():
+        extractor, env_steps = load_keypoints(kept, space, run=pretraining_identity(cfg))
+        save_folder(folder, {**read_config(kept, kind=KIND), "run": cfg.identity()}, {WEIGHTS_FILE: extractor})
+        return extractor, env_steps
     start = time.time()
     torch.manual_seed(cfg.seed)
     frame_cfg = dataclasses.replace(cfg, reward="oracle")  # the frames' scenes; no reward is read
@@ -147,11 +159,25 @@ def pretrain_keypoints(cfg: TrainConfig, space, folder: str | Path, progress: bo
     extractor = keypoint_extractor(space, cfg.keypoints, cfg.pixel_stride)
     extractor.pixels.load_state_dict(model.keypoints.state_dict())
     env_steps = len(frames) * cfg.action_repeat
-    save_folder(folder, {"kind": KIND, "run": cfg.identity(), "keypoints": cfg.keypoints, "pixel_size": cfg.pixel_size,
-                         "pixel_stride": cfg.pixel_stride, "env_steps": env_steps, "frames": len(frames),
-                         "loss_first_100": float(np.mean(losses[:100])), "loss_last_100": float(np.mean(losses[-100:])),
-                         "wall_s": round(time.time() - start, 1)}, {WEIGHTS_FILE: extractor})
+    config = {"kind": KIND, "run": cfg.identity(), "keypoints": cfg.keypoints, "pixel_size": cfg.pixel_size,
+              "pixel_stride": cfg.pixel_stride, "env_steps": env_steps, "frames": len(frames),
+              "loss_first_100": float(np.mean(losses[:100])), "loss_last_100": float(np.mean(losses[-100:])),
+              "wall_s": round(time.time() - start, 1)}
+    save_folder(folder, config, {WEIGHTS_FILE: extractor})
+    if kept is not None:  # written config last: a run beside this one reads whole weights or none
+        save_folder(kept, {**config, "run": pretraining_identity(cfg)}, {WEIGHTS_FILE: extractor})
     return freeze(extractor), env_steps
+
+
+def pretraining_identity(cfg: TrainConfig) -> dict:
+    """The settings a run's pretraining depends on: all of the run's but its reward's."""
+    return {**cfg.identity(), "reward": None, "reward_model": None, "zsrm_output": None}
+
+
+def pretraining_key(cfg: TrainConfig) -> str:
+    """A folder name for the pretraining of ``cfg`` (:func:`pretraining_identity`, hashed)."""
+    text = json.dumps(pretraining_identity(cfg), sort_keys=True)
+    return f"{cfg.goal.replace(' ', '_')[:40]}-{cfg.seed}-{hashlib.sha256(text.encode()).hexdigest()[:12]}"
 
 
 def keypoint_extractor(space, keypoints: int, pixel_stride: int) -> KeypointExtractor:

@@ -152,8 +152,9 @@ def restore_buffer(buffer, path: Path, where: dict) -> None:
 
 
 def train_sac(cfg: TrainConfig, out: Path, fresh: bool = False, progress: bool = True, on_eval=None,
-              device: str = "cpu", env_workers: int = 1) -> dict:
-    """Pretrain the keypoints (or load them), then train (or resume) SAC on them; the summary."""
+              device: str = "cpu", env_workers: int = 1, shared_keypoints: Path | None = None) -> dict:
+    """Pretrain the keypoints (or load them; ``shared_keypoints``: :func:`pretrain_keypoints`'s
+    ``shared``), then train (or resume) SAC on them; the summary."""
     from tqdm import tqdm
 
     if fresh:
@@ -162,7 +163,8 @@ def train_sac(cfg: TrainConfig, out: Path, fresh: bool = False, progress: bool =
     state = None if fresh else load_sac_checkpoint(out / "checkpoint", cfg)
     done_steps, rows = (state["env_steps"], state["rows"]) if state is not None else (0, [])
     view = policy_view(rewarded_env(cfg, out, done_steps, env_workers)[0], vlm, cfg)
-    extractor, offset = pretrain_keypoints(cfg, view.observation_space, out / "keypoints", progress)
+    extractor, offset = pretrain_keypoints(cfg, view.observation_space, out / "keypoints", progress,
+                                           shared_keypoints)
     train_env = VecKeypoints(view, extractor)
     model = build_sac(cfg, train_env, device)
     if state is not None:

@@ -5,6 +5,7 @@ Each trial is one :func:`~zsrm.rl.ppo.train` run in its own folder
 
 * a finished trial (its ``summary.json`` made with the same settings) is skipped;
 * a killed trial resumes from its last checkpoint with the same step count;
+* SAC trials that differ only in their reward share their keypoints' pretraining (``ROOT/_keypoints/``);
 * trials run in parallel on a local Ray (``ray.init(num_cpus=N)``) or spread over a cluster
   (``address`` HOST:PORT as ``ray start --head`` prints it, ``ray://HOST:PORT`` or ``auto``); on
   a cluster ROOT must be shared storage, and before any trial starts every node is asked
@@ -95,8 +96,9 @@ def run_trial(trial: dict) -> dict:
         os.chdir(trial["cwd"])
     cfg = TrainConfig.from_dict(trial["config"])
     record_attempt(Path(trial["root"]) / trial["name"])
-    summary = train(cfg, Path(trial["root"]) / trial["name"], progress=False, env_workers=1,  # one core per trial
-                    on_eval=lambda row: tune.report({**row, "final": 0}))
+    root = Path(trial["root"])
+    summary = train(cfg, root / trial["name"], progress=False, env_workers=1,  # one core per trial
+                    on_eval=lambda row: tune.report({**row, "final": 0}), shared_keypoints=root / "_keypoints")
     result = {"env_steps": summary["env_steps"], "mean": summary["final_mean"], "final": 1}
     tune.report(result)
     return result
