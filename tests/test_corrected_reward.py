@@ -137,3 +137,53 @@ def test_the_box_area_check_stops_a_box_point_on_a_block_reading_inside_of(tmp_p
     assert hover["checked"]["false_goal"] < 0.1 * hover["frames"]
     assert scripted["oracle_goal"] >= 5 and scripted["checked"]["recall"] >= 0.7
     assert scripted["checked"]["recall"] == scripted["unchecked"]["recall"]  # no goal frame lost
+
+
+def test_the_labeler_gets_the_other_cameras_frames_of_the_steps_it_labels():
+    seen = []
+
+    def labeler(frames, left):
+        np.testing.assert_array_equal(left, 255 - frames)  # the same steps' frames of the other camera
+        seen.append(len(frames))
+        return bar_free(frames)
+
+    reward = CorrectedZSRMReward(student(), labeler, update_every=8, label_frames=5, steps=1, min_each=1,
+                                 label_cameras=("left",))
+    for seed in range(4):
+        frames = square_frames(4, bar=seed % 2 == 0, seed=seed)
+        reward({"front": frames, "left": 255 - frames}, GOAL)
+    assert seen == [5, 5] and reward.labelled == 10 and reward.updates == 2
+
+
+def test_the_front_check_is_an_inside_of_setting_and_its_training_scenes_render_the_front_camera():
+    from zsrm.rl.envs import make_vec
+
+    on = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000, zsrm_correct_front=True)
+    assert on.to_dict()["zsrm_correct_front"] is True
+    assert "zsrm_correct_front" not in TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000).to_dict()
+    for other in ({"reward": "oracle"}, {"zsrm_correct_every": 0}, {"goal": "stack"}):  # read only by the correction
+        assert not TrainConfig(**{**on.to_dict(), **other}).zsrm_correct_front
+    train, evaluate = make_vec(on, 1, 0, training=True), make_vec(on, 1, 0)
+    assert set(train.observation_space.spaces) == {"tilted", "front"} and set(evaluate.observation_space.spaces) == {"tilted"}
+    train.close(), evaluate.close()
+
+
+def test_the_front_check_stops_inside_of_for_a_block_held_in_front_of_the_box(tmp_path, monkeypatch):
+    import json
+
+    from test_distill import run_probe
+    from zsrm.rl.corrected import goal_labeler
+
+    # seed 902: the block held 3 cm in front of the box, 8 cm up, reads as in it on the tilted camera
+    run_probe("inside_front_check.py", monkeypatch, "--offsets", "-0.03", "--seeds", "902", "--scripted-episodes", "1",
+              "--every", "3", "--calibration", str(tmp_path / "calib"), "--out", str(tmp_path / "check.json"))
+    out = json.loads((tmp_path / "check.json").read_text())
+    held, scripted = out["hover-0.03"], out["scripted"]
+    assert held["oracle_goal"] == 0 and held["tilted_only"]["false_goal"] > 0.5 * held["frames"]
+    assert held["front_check"]["false_goal"] < 0.1 * held["frames"]
+    assert scripted["oracle_goal"] >= 5 and scripted["front_check"]["recall"] >= 0.8
+    assert scripted["front_check"]["recall"] == scripted["tilted_only"]["recall"]  # no goal frame lost here
+    labeler = goal_labeler(TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000,
+                                       zsrm_correct_front=True), tmp_path / "calib")
+    with pytest.raises(ValueError, match="front camera's frames"):
+        labeler(np.zeros((2, 64, 64, 3), np.uint8))

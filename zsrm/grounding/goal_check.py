@@ -22,17 +22,28 @@ from zsrm.tasks.language import Task
 from zsrm.tasks.relations import RELATIONS
 
 CALIBRATION_IMAGES = 16  # exploration renders the labeler is calibrated on (zsrm label: a dataset's first 8)
+# The front check of "inside of" (``front_check``): on the front camera the block's Grad-CAM point in
+# the box sits this far above the box's, in block widths (the walls hide its lower part: scripted
+# goal frames read 0.25 to 0.68, 10th to 90th percentile); a block held in the air in front of the
+# box, which the tilted camera reads as in it, reads outside (the box's point then lands on the
+# held block or the gripper) (probes/inside_front_check.py).
+FRONT_RISE = (0.15, 0.85)
 
 
 class GoalLabeler:
     """``labeler(frames)``: (N,) bool, the goal's relation read by Grad-CAM on frames (N, H, W, 3)
     of the goal's camera of its task scene, which holds the goal's objects.
 
-    Build it with :meth:`calibrated`; ``folder`` keeps the calibration renders (a rerun reads them)."""
+    Build it with :meth:`calibrated`; ``folder`` keeps the calibration renders (a rerun reads them).
+    ``front_check`` (inside of): called with the front camera's frames of the same steps too
+    (``labeler(frames, front=...)``), it says inside of only where they agree (:data:`FRONT_RISE`)."""
 
-    def __init__(self, task: Task, grounder: Grounder, labeler: SpatialLabeler):
+    def __init__(self, task: Task, grounder: Grounder, labeler: SpatialLabeler, front_check: bool = False):
         self.task, self.grounder, self.camera = task, grounder, RELATIONS[task.relation].camera
-        self.labeler = labeler
+        self.labeler, self.front_check = labeler, bool(front_check)
+        if self.front_check and (task.relation != "inside_of" or "front" not in grounder.data.cameras):
+            raise ValueError(f"the front check reads inside of on calibration data with the front camera; "
+                             f"{task.text!r} is {task.relation}, the data has {', '.join(grounder.data.cameras)}")
         objects = grounder.data.objects  # the colours, then the box where the data can hold it
         missing = set(task.objects) - set(objects)
         if missing:
@@ -41,28 +52,42 @@ class GoalLabeler:
 
     @classmethod
     def calibrated(cls, task: Task, scene: str, image_size: int, folder: str | Path, vlm, vlm_spec: str = "scene",
-                   box_vlm=None, box_min_area: float = 0.0) -> "GoalLabeler":
+                   box_vlm=None, box_min_area: float = 0.0, front_check: bool = False) -> "GoalLabeler":
         """Calibrated on ``CALIBRATION_IMAGES`` exploration renders of ``scene`` (a zsrm scene name:
         tabletop or pushing) at ``image_size``, collected into ``folder`` (once). ``box_min_area``:
         a box point whose silhouette covers less of the table (square metres) is not the box (see
-        :class:`~zsrm.grounding.annotate.Grounder`)."""
+        :class:`~zsrm.grounding.annotate.Grounder`); ``front_check``: see the class."""
         if scene not in SCENE_IDS:
             raise ValueError(f"unknown scene {scene!r}; the goal labeler reads zsrm's scenes: {', '.join(SCENE_IDS)}")
         camera = RELATIONS[task.relation].camera
         p_box = 0.5 if task.has_container else 0.0
+        cameras = (camera, "front") if front_check and camera != "front" else (camera,)
         data = collect(CollectConfig(images=CALIBRATION_IMAGES, shard_size=CALIBRATION_IMAGES, scenes=(scene,),
-                                     cameras=(camera,), image_size=image_size, p_box=p_box), folder, progress=False)
+                                     cameras=cameras, image_size=image_size, p_box=p_box), folder, progress=False)
         cfg = LabelConfig(vlm=vlm_spec)
         grounder = Grounder(vlm, cfg, data, box_vlm=box_vlm, box_min_area=box_min_area)
-        return cls(task, grounder, labelers(data, cfg, relations=(task.relation,))[scene])
+        return cls(task, grounder, labelers(data, cfg, relations=(task.relation,))[scene], front_check)
 
-    def __call__(self, frames: np.ndarray) -> np.ndarray:
+    def __call__(self, frames: np.ndarray, front: np.ndarray | None = None) -> np.ndarray:
         frames = np.asarray(frames)  # checked by Grad-CAM (zsrm.grounding.gradcam)
         n = len(frames)
-        arrays = {"scene": np.zeros(n, np.int64), f"images_{self.camera}": frames}
+        if self.front_check and (front is None or len(front) != n):
+            raise ValueError(f"the front check needs the front camera's frames of the same {n} steps")
+        arrays = {"scene": np.zeros(n, np.int64), f"images_{self.camera}": frames,
+                  **({"images_front": np.asarray(front)} if front is not None else {})}
         if self.grounder.data.has_box:
             arrays["box_present"] = np.full(n, self.present[-1])
         pixels = gradcam_objects(self.grounder.data, self.grounder.shard(arrays, colours=self.task.objects))
         present = np.broadcast_to(self.present, (n, len(self.present)))
-        captions = self.labeler.captions(pixels, present)
-        return np.array([self.task.text in c for c in captions], dtype=bool)
+        captions = self.labeler.captions({self.camera: pixels[self.camera]}, present)
+        holds = np.array([self.task.text in c for c in captions], dtype=bool)
+        return holds & self.front_rise_ok(pixels["front"]) if self.front_check else holds
+
+    def front_rise_ok(self, front: np.ndarray) -> np.ndarray:
+        """(N,) bool: the block's front Grad-CAM point (N, K, 2) sits :data:`FRONT_RISE` above the box's."""
+        objects = list(self.grounder.data.objects)
+        block, box = front[:, objects.index(self.task.objects[0])], front[:, objects.index(self.task.objects[1])]
+        width = self.grounder.data.block_width_px[self.grounder.data.scenes[0]]["front"]
+        rise = (box[:, 1] - block[:, 1]) / width  # rows grow down
+        with np.errstate(invalid="ignore"):
+            return (rise > FRONT_RISE[0]) & (rise < FRONT_RISE[1])  # NaN (not located): False

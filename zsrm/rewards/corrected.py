@@ -35,7 +35,8 @@ from zsrm.rewards.vice import FrameBank
 class CorrectedZSRMReward(ZSRMReward):
     """:class:`~zsrm.rewards.binarised.ZSRMReward` whose model keeps learning from the policy's frames.
 
-    labeler:      frames (N, H, W, 3) of the goal's camera -> (N,) bool, does the goal hold.
+    labeler:      frames (N, H, W, 3) of the goal's camera -> (N,) bool, does the goal hold; with
+                  ``label_cameras``, also given those cameras' frames of the same steps by name.
     update_every: frames between updates; each labels ``label_frames`` of the frames seen since the
                   last one (drawn at random) and takes ``steps`` Adam steps on batches of half
                   labelled goal frames, half others, from the latest ``memory`` of each.
@@ -49,7 +50,8 @@ class CorrectedZSRMReward(ZSRMReward):
 
     def __init__(self, model, labeler: Callable[[np.ndarray], np.ndarray], update_every: int,
                  label_frames: int = 128, steps: int = 50, memory: int = 4096, batch_size: int = 64,
-                 lr: float = 1e-4, min_each: int = 16, seed: int = 0, on_update=None, **kwargs):
+                 lr: float = 1e-4, min_each: int = 16, seed: int = 0, on_update=None,
+                 label_cameras: tuple[str, ...] = (), **kwargs):
         super().__init__(model, **kwargs)
         if min(update_every, label_frames, steps, memory, batch_size) < 1:
             raise ValueError(f"update_every, label_frames, steps, memory and batch_size must be >= 1, got "
@@ -57,8 +59,9 @@ class CorrectedZSRMReward(ZSRMReward):
         self.labeler, self.update_every, self.label_frames = labeler, int(update_every), int(label_frames)
         self.steps, self.memory, self.batch_size, self.min_each = int(steps), int(memory), int(batch_size), int(min_each)
         self.rng = np.random.default_rng(seed)
+        self.label_cameras = tuple(label_cameras)  # cameras the labeler reads beside the goal's
         self.banks: dict[bool, FrameBank] = {}
-        self.recent: list[np.ndarray] = []
+        self.recent: list[dict[str, np.ndarray]] = []
         self.seen = self.updates = self.labelled = self.labelled_goal = 0
         self.opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=lr)
         self.on_update = on_update
@@ -66,19 +69,21 @@ class CorrectedZSRMReward(ZSRMReward):
     def compute(self, observations, goal, infos) -> np.ndarray:
         reward = super().compute(observations, goal, infos)
         frames = check_images(observations[self.goal_camera(goal)])
-        self.recent.append(np.array(frames))
+        self.recent.append({"": np.array(frames), **{c: np.array(observations[c]) for c in self.label_cameras}})
         self.seen += len(frames)
         if self.seen >= self.update_every:
             self.seen = 0
-            self.learn(np.concatenate(self.recent), goal)
+            seen = {key: np.concatenate([step[key] for step in self.recent]) for key in self.recent[0]}
+            self.learn(seen.pop(""), goal, seen)
             self.recent = []
         return reward
 
-    def learn(self, frames: np.ndarray, goal: str) -> None:
-        """Label a sample of ``frames`` and, once goal and other frames have both been seen, train."""
-        pick = self.rng.choice(len(frames), size=min(self.label_frames, len(frames)), replace=False)
-        sample = frames[np.sort(pick)]
-        holds = np.asarray(self.labeler(sample), dtype=bool)
+    def learn(self, frames: np.ndarray, goal: str, others: dict[str, np.ndarray] | None = None) -> None:
+        """Label a sample of ``frames`` (and ``others``, other cameras' frames of the same steps, for
+        the labeler) and, once goal and other frames have both been seen, train."""
+        pick = np.sort(self.rng.choice(len(frames), size=min(self.label_frames, len(frames)), replace=False))
+        sample = frames[pick]
+        holds = np.asarray(self.labeler(sample, **{c: v[pick] for c, v in (others or {}).items()}), dtype=bool)
         self.labelled += len(sample)
         self.labelled_goal += int(holds.sum())
         for kind in (True, False):

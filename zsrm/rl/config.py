@@ -136,6 +136,12 @@ class TrainConfig:
     silhouette covers less of the table than this (square metres; the box alone 0.013-0.016 on the
     tilted camera, a block 0.007-0.010) sat on a block and is dropped, so inside of does not hold
     there; 0: no check (the labeler as zsrm label's)"""
+    zsrm_correct_front: bool = False
+    """--reward zsrm with zsrm_correct_every, inside of the box: the training scenes render the front
+    camera too, for the labeler alone, and inside of holds only where the block's Grad-CAM point there
+    sits a little above the box's (zsrm.grounding.goal_check.FRONT_RISE); on the tilted camera a block
+    held in the air in front of the box reads as one in it (the policy and the reward read the tilted
+    camera alone)"""
     vice_update_every: int = 4000
     """--reward vice: every this many env steps the goal classifier takes 50 Adam steps on the
     policy's latest frames beside the frames it was fitted on, as Fu et al. (2018) train VICE
@@ -161,7 +167,7 @@ class TrainConfig:
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
              "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0,
              "near_start": 0.0, "zsrm_correct_every": 0, "zsrm_correct_frames": 128,
-             "zsrm_correct_box_area": 0.0, "pair_scale": 0.0, "pixel_stride": 4, "learner": "ppo",
+             "zsrm_correct_box_area": 0.0, "zsrm_correct_front": False, "pair_scale": 0.0, "pixel_stride": 4, "learner": "ppo",
              "pretrain_episodes": 320, "pretrain_steps": 4000}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
@@ -248,8 +254,10 @@ class TrainConfig:
             self.zsrm_correct_every = self.ADDED["zsrm_correct_every"]
             self.zsrm_correct_frames = self.ADDED["zsrm_correct_frames"]
             self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
-        if self.zsrm_correct_box_area and not goal_has_box(self.goal, self.scene):  # only the box is checked
+            self.zsrm_correct_front = self.ADDED["zsrm_correct_front"]
+        if not goal_has_box(self.goal, self.scene):  # only the box is checked
             self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
+            self.zsrm_correct_front = self.ADDED["zsrm_correct_front"]
         if self.reward == "random":  # uniform random actions: no policy network reads its inputs
             self.pair_scale = self.ADDED["pair_scale"]
             self.pixel_stride = self.ADDED["pixel_stride"]

@@ -28,7 +28,8 @@ def goal_labeler(cfg: TrainConfig, folder: str | Path) -> GoalLabeler:
     scene = next(name for name, env_id in SCENE_IDS.items() if env_id == entry.env_id)
     box_vlm = load_vlm(BOX_VLM) if cfg.vlm == DEFAULT_VLM and BOX in entry.task.objects else None
     return GoalLabeler.calibrated(entry.task, scene, cfg.image_size, folder, load_vlm(cfg.vlm), vlm_spec=cfg.vlm,
-                                  box_vlm=box_vlm, box_min_area=cfg.zsrm_correct_box_area)
+                                  box_vlm=box_vlm, box_min_area=cfg.zsrm_correct_box_area,
+                                  front_check=cfg.zsrm_correct_front)
 
 
 def corrected_reward(cfg: TrainConfig, out: str | Path) -> CorrectedZSRMReward:
@@ -39,7 +40,8 @@ def corrected_reward(cfg: TrainConfig, out: str | Path) -> CorrectedZSRMReward:
     latest = out / "zsrm_online"
     model = load_reward_backbone(latest if (latest / "config.json").is_file() else cfg.reward_model)
     reward = CorrectedZSRMReward(model, labeler, update_every=max(1, cfg.zsrm_correct_every // cfg.action_repeat),
-                                 label_frames=cfg.zsrm_correct_frames, seed=cfg.seed, output=cfg.zsrm_output)
+                                 label_frames=cfg.zsrm_correct_frames, seed=cfg.seed, output=cfg.zsrm_output,
+                                 label_cameras=("front",) if labeler.front_check else ())
     if (latest / "corrections.json").is_file():  # a resumed run counts on from what it had done
         done = read_json(latest / "corrections.json", "the corrected reward's counts")
         reward.updates, reward.labelled, reward.labelled_goal = done["updates"], done["labelled"], done["labelled_goal"]

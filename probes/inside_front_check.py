@@ -1,0 +1,117 @@
+"""Does the goal labeler's front check (``--zsrm-correct-front``) stop "inside of" where a block is
+held in the air in front of the box, which the tilted camera reads as in it, and keep the true goal
+frames?
+
+Plays place_inside's scene with the scripted controller (the block dropped in the box: the goal)
+and with the same controller made to hold the block where it would let it go, moved ``dy`` metres
+toward the front camera (``hover-0.03``: 3 cm in front of the box, 8 cm above the table), never
+releasing it; labels every frame with the goal labeler (the box check on, as the runs use it)
+without and with the front check, and records where the front camera's block point sits above the
+box's (in block widths) on the frames the oracle calls the goal. The oracle's verdict is only
+compared with, never read by the labeler.
+
+    python probes/inside_front_check.py --out results/side/grounding/inside_front_check.json
+"""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from zsrm.common.files import write_json
+from zsrm.envs.rollout import episode_steps, make_env
+from zsrm.envs.scripted import PickPlaceController, scripted_controller
+from zsrm.grounding.annotate import gradcam_objects
+from zsrm.rl.config import TrainConfig
+from zsrm.rl.corrected import goal_labeler
+
+GOAL = "a yellow block inside of a box"
+
+
+def held_in_front(dy: float):
+    """A policy maker: the scripted controller, its drop point moved ``dy`` m along y, never letting go."""
+    def make(env):
+        script = PickPlaceController(env.unwrapped)
+        goal = script._goal
+        script._goal = lambda: goal() + (0.0, dy, 0.0)
+
+        def act() -> np.ndarray:
+            if script.phase in ("release", "retreat"):
+                script.phase = "lower"  # hold it there
+            return script()
+        return act
+    return make
+
+
+def episode_frames(env, policy, seeds, skip: int = 5, every: int = 1):
+    """Both cameras' frames (after the first ``skip`` steps) and the oracle's verdicts."""
+    tilted, front, oracle = [], [], []
+    for seed in seeds:
+        for _, obs, info, _ in list(episode_steps(env, policy, seed=seed))[skip::every]:
+            tilted.append(obs["tilted"])
+            front.append(obs["front"])
+            oracle.append(bool(info["is_success"]))
+    return np.stack(tilted), np.stack(front), np.array(oracle)
+
+
+def front_rise(labeler, front: np.ndarray) -> np.ndarray:
+    """The block's front Grad-CAM point above the box's, in block widths (the check's quantity)."""
+    n = len(front)
+    arrays = {"scene": np.zeros(n, np.int64), "images_front": front, "box_present": np.ones(n, bool),
+              "images_tilted": np.zeros((n, *front.shape[1:]), np.uint8)}
+    grad = labeler.grounder.shard(arrays, colours=labeler.task.objects)
+    pixels = gradcam_objects(labeler.grounder.data, grad)["front"]
+    objects = list(labeler.grounder.data.objects)
+    block, box = pixels[:, objects.index("yellow")], pixels[:, objects.index("box")]
+    return (box[:, 1] - block[:, 1]) / labeler.grounder.data.block_width_px["tabletop"]["front"]
+
+
+def check(offsets, seeds, scripted_episodes: int, every: int, folder: str) -> dict:
+    cfg = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=10000, zsrm_correct_box_area=0.0115,
+                      zsrm_correct_front=True)
+    env = make_env(GOAL, cameras=("tilted", "front"), image_size=cfg.image_size)
+    runs = {f"hover{dy:+.2f}": episode_frames(env, held_in_front(dy), seeds, every=every) for dy in offsets}
+    runs["scripted"] = episode_frames(env, scripted_controller, range(scripted_episodes), every=every)
+    env.close()
+    labeler = goal_labeler(cfg, folder)
+    out = {}
+    for name, (tilted, front, oracle) in runs.items():
+        checked = labeler(tilted, front=front)
+        labeler.front_check = False
+        unchecked = labeler(tilted, front=front)  # its front frames read, not checked
+        labeler.front_check = True
+        row = {"frames": len(tilted), "oracle_goal": int(oracle.sum())}
+        for key, said in (("tilted_only", unchecked), ("front_check", checked)):
+            row[key] = {"says_goal": int(said.sum()), "false_goal": int((said & ~oracle).sum()),
+                        "recall": float(said[oracle].mean()) if oracle.any() else None}
+        rise = front_rise(labeler, front)
+        for key, where in (("oracle_goal", oracle), ("tilted_false_goal", unchecked & ~oracle)):
+            if where.any():
+                row[f"rise_{key}_p10_p50_p90"] = [round(float(v), 3) for v in np.nanpercentile(rise[where], [10, 50, 90])]
+        out[name] = row
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--offsets", type=float, nargs="+", default=[-0.04, -0.03, -0.02, 0.0],
+                        help="where the block is held: metres from the drop point along y (negative: toward the front)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=list(range(900, 904)), help="episodes per offset")
+    parser.add_argument("--scripted-episodes", type=int, default=6)
+    parser.add_argument("--every", type=int, default=1, help="keep every n-th frame")
+    parser.add_argument("--calibration", default="runs/inside_front_check", help="the labeler's calibration renders")
+    parser.add_argument("--out", default="results/side/grounding/inside_front_check.json")
+    args = parser.parse_args()
+    out = check(args.offsets, args.seeds, args.scripted_episodes, args.every, args.calibration)
+    out["meta"] = {"goal": GOAL, "cameras": ["tilted", "front"], "box_area_m2": 0.0115,
+                   "command": f"python probes/inside_front_check.py --offsets {' '.join(map(str, args.offsets))} "
+                              f"--seeds {' '.join(map(str, args.seeds))} --scripted-episodes "
+                              f"{args.scripted_episodes} --every {args.every} --out {args.out}"}
+    write_json(args.out, out)
+    for name, row in out.items():
+        if name != "meta":
+            print(name, row)
+
+
+if __name__ == "__main__":
+    main()
