@@ -225,6 +225,11 @@ FIGURES = [
     Figure("Learning from pixels, v3 with the zsrm reward corrected every 10000 env steps at 500k env steps (in "
            "between, in front of): final success rate, 3 seeds", "rl/correct10k-500k/learning.json", _nine,
            _recorded_command, headline=False),
+    Figure("Learning from pixels, each task's own learner (--config per-task: SAC for push_close, the correction "
+           "and 500k for in between and in front of, 500k for behind, else v3): final success rate, 3 seeds",
+           "rl/per-task/learning.json", _nine, _recorded_command, headline=False),
+    Figure("Learning from pixels, SAC on pretrained keypoints (--config sac, 500k env steps): final success rate",
+           "rl/sac/learning.json", _nine, _recorded_command, headline=False),
     Figure("Learning from pixels, the v2 learner (the default until 2026-12-06), final oracle episode reward",
            "rl/v2/learning.json", _learning, _recorded_command),
     Figure("Table 2 in colour frames (the paper's setting): the paper's three, behaviour cloning",
@@ -355,6 +360,10 @@ SIDE = [
      "(--zsrm-correct-every 10000 --zsrm-correct-box-area 0.0115 --gamma 0.99, seed 1; scored 19.7): the reward pays "
      "in 0.72 of decisions, the oracle in 0.21; the block held 8 cm up over the box, which the goal labeler on the "
      "tilted camera calls inside of in 0.57 of those frames (height and depth look alike there)"),
+    ("side/grounding/inside_front_check.json", "the goal labeler's front check (--zsrm-correct-front) on place_inside "
+     "frames of the block held 8 cm up, 0-4 cm in front of the box, never let go (4 episodes each): the tilted "
+     "camera's labeler says inside of in 149 and 222 of 384 frames at 4 and 3 cm, 73 and 144 with the check; the "
+     "scripted goal frames' recall 0.94, 0.91 with it (probes/inside_front_check.py)"),
     ("side/rl/push_close_ends.json", "a push_close oracle policy (500k, seed 0) by start side, and its 20 of 30 "
      "episodes that never succeed: the pucks end 14.5 cm apart (close to: under 10), the nearest 14.3: the push "
      "stops short (probes/push_sides.py)"),
