@@ -132,3 +132,8 @@ def test_the_per_task_preset_gives_each_task_its_own_learner():
     assert with_preset(Train(goal="place_front", reward="zsrm", zsrm_correct_every=5000),
                        "per-task").zsrm_correct_every == 5000
     assert with_preset(Train(goal="stack"), "per-task") == with_preset(Train(goal="stack"), "cpu")
+    # by the goal's relation: any push goal is SAC's; an own scene's goals take the default
+    assert with_preset(Train(goal="a blue puck close to a yellow puck"), "per-task").learner == "sac"
+    own = Sweep(config="per-task", tasks=("a red cylinder behind a purple cylinder",), rewards=("oracle",), seeds=(0,),
+                scene="examples.own_scene.adapter:OwnScene").trials()[0]["config"]
+    assert own["steps"] == 300_000

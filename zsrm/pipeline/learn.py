@@ -22,7 +22,7 @@ def with_preset(options, name: str) -> TrainConfig:
     """The TrainConfig of ``options``; a preset's value fills each field left at its default."""
     defaults = TrainConfig()
     values = {f.name: getattr(options, f.name) for f in dataclasses.fields(TrainConfig)}
-    for key, value in preset_settings(name, options.goal).items():
+    for key, value in preset_settings(name, options.goal, options.scene).items():
         if values[key] == getattr(defaults, key):
             values[key] = value
     return TrainConfig(**values)
@@ -33,7 +33,7 @@ class Train(TrainConfig):
     """Train a policy from pixels with PPO (or SAC: --config sac) and a reward from the goal sentence."""
 
     out: str | None = None  # run folder (default: runs/rl/<goal>-<reward>-<seed>)
-    config: PresetName = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v3 (issue 52's learner, the default's values since 2026-12-06: less action noise, mean-action evaluation), v2 (before then), v1 (before 2026-12-04), sac (SAC on keypoints pretrained on random actions' frames: 64 px, 4 envs, 500k steps), per-task (issue 52's learner per task: sac for push_close, 500k steps and the online correction for place_between and place_front, 500k for place_behind, else the default)
+    config: PresetName = "cpu"  # preset: cpu (300k steps, 2 cores), paper (200k steps, more envs), v3 (issue 52's learner, the default's values since 2026-12-06: less action noise, mean-action evaluation), v2 (before then), v1 (before 2026-12-04), sac (SAC on keypoints pretrained on random actions' frames: 64 px, 4 envs, 500k steps), per-task (issue 52's learner by the goal's relation: sac for close to (push_close), 500k steps and the online correction for in between and in front of, 500k for behind, else the default)
     fresh: bool = False  # start over instead of resuming the run folder's checkpoint
     device: str = "cpu"  # where the VLM trunk and PPO run: cpu, cuda, cuda:N or auto (not part of the run's config)
     env_workers: int = 0  # processes that step the scenes (0: 2 with 8+ envs and 2+ cores, else 1; the same numbers either way); give 1 when runs share the cores
@@ -162,7 +162,7 @@ class Sweep:
     def overrides(self, task: str | None = None) -> dict:
         """The TrainConfig settings of ``task``'s trials (the preset's for the task, then the command's)."""
         # A model folder by its absolute path: Ray Tune runs each trial in its own working directory.
-        return {**preset_settings(self.config, task), **parse_settings(self.settings), **self.train,
+        return {**preset_settings(self.config, task, self.scene), **parse_settings(self.settings), **self.train,
                 **({"steps": self.steps} if self.steps else {}), "reward_model": absolute_if_folder(self.reward_model),
                 "vlm": absolute_if_folder(self.vlm), **({"scene": self.scene} if self.scene else {})}
 

@@ -380,31 +380,42 @@ PRESETS: dict[str, dict] = {
 }
 
 
-# Presets whose settings depend on the task; a task left out takes the default's (v3, 300k env steps).
+# Presets whose settings depend on the goal's relation (in zsrm's scenes); a relation left out takes
+# the default's (v3, 300k env steps).
 TASK_PRESETS: dict[str, dict[str, dict]] = {
     # issue 52's learner per task (docs/training.md), at most 500k env steps: SAC for the push, the
     # online correction where the student is fooled, a longer budget where PPO was still learning
     "per-task": {
-        "push_close": PRESETS["sac"],
-        "place_between": {"steps": 500_000, "zsrm_correct_every": 10_000},
-        "place_front": {"steps": 500_000, "zsrm_correct_every": 10_000},
-        "place_behind": {"steps": 500_000},
+        "close_to": PRESETS["sac"],
+        "in_between": {"steps": 500_000, "zsrm_correct_every": 10_000},
+        "in_front_of": {"steps": 500_000, "zsrm_correct_every": 10_000},
+        "behind": {"steps": 500_000},
     },
 }
 PRESETS["per-task"] = {}
 
 
-def preset_settings(name: str, goal: str | None = None) -> dict:
-    """The settings of preset ``name`` for ``goal`` (a catalogue task; the per-task presets read it).
+def preset_settings(name: str, goal: str | None = None, scene: str | None = None) -> dict:
+    """The settings of preset ``name`` for ``goal`` (a catalogue task or a goal sentence; the
+    per-task presets read its relation; an own ``scene``'s goals take the default's).
 
     >>> preset_settings("per-task", "push_close")["learner"], preset_settings("per-task", "stack")
     ('sac', {})
+    >>> preset_settings("per-task", "a green block behind a blue block")
+    {'steps': 500000}
     """
     if name not in PRESETS:
         raise ValueError(f"unknown config {name!r}; choose one of {', '.join(PRESETS)}")
-    return {**PRESETS[name], **TASK_PRESETS.get(name, {}).get(goal, {})}
+    relation = None
+    if name in TASK_PRESETS and goal and not scene:
+        try:
+            relation = goal_relation(goal)
+        except ValueError:  # not a goal: TrainConfig says why
+            relation = None
+    return {**PRESETS[name], **TASK_PRESETS.get(name, {}).get(relation, {})}
 
 
 def preset(name: str, **overrides) -> TrainConfig:
     # built anew, not replaced from a default: the default's resolved settings (start) follow its goal
-    return TrainConfig(**{**preset_settings(name, overrides.get("goal", TrainConfig.goal)), **overrides})
+    return TrainConfig(**{**preset_settings(name, overrides.get("goal", TrainConfig.goal), overrides.get("scene")),
+                          **overrides})
