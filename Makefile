@@ -86,6 +86,12 @@ results: setup
 	OMP_NUM_THREADS=1 $(PY) benchmarks/ppo_speed.py --out results/ppo_speed.json
 	# The default learner (v3) on the nine relations' tasks, 3 seeds (81 trials, about 6 core-hours)
 	$(VENV)/bin/zsrm sweep --root runs/rl-v3 --out results/rl/learning.json
+	# Each task's own learner (--config per-task, issue 52; trials of the sweeps they share settings with are kept in
+	# results/rl/per-task/trials/), and SAC on pretrained keypoints on the nine tasks (about 20 core-minutes a trial)
+	$(VENV)/bin/zsrm sweep --config per-task --root runs/rl-per-task --out results/rl/per-task/learning.json
+	$(VENV)/bin/zsrm sweep --config sac --steps 500000 --tasks place_inside push_close place_between place_front \
+		place_behind stack place_left place_right place_below --rewards zsrm oracle random --seeds 0 1 2 \
+		--root runs/rl-sac --out results/rl/sac/learning.json
 	# Figures 4 and 6 with it (base, vice, curiosity and the pendulum; shares the learning trials above)
 	$(VENV)/bin/zsrm sweep --tasks stack place_right push_close pendulum --rewards oracle zsrm base vice curiosity random \
 		--seeds 0 1 2 --root runs/rl-v3 --out results/rl/summary.json
