@@ -21,7 +21,7 @@ import numpy as np
 from zsrm.common.files import write_json
 from zsrm.envs.rollout import episode_steps, make_env
 from zsrm.envs.scripted import PickPlaceController, scripted_controller
-from zsrm.grounding.annotate import gradcam_objects
+from zsrm.grounding.goal_check import front_rise_ok
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.corrected import goal_labeler
 
@@ -54,18 +54,6 @@ def episode_frames(env, policy, seeds, skip: int = 5, every: int = 1):
     return np.stack(tilted), np.stack(front), np.array(oracle)
 
 
-def front_rise(labeler, front: np.ndarray) -> np.ndarray:
-    """The block's front Grad-CAM point above the box's, in block widths (the check's quantity)."""
-    n = len(front)
-    arrays = {"scene": np.zeros(n, np.int64), "images_front": front, "box_present": np.ones(n, bool),
-              "images_tilted": np.zeros((n, *front.shape[1:]), np.uint8)}
-    grad = labeler.grounder.shard(arrays, colours=labeler.task.objects)
-    pixels = gradcam_objects(labeler.grounder.data, grad)["front"]
-    objects = list(labeler.grounder.data.objects)
-    block, box = pixels[:, objects.index("yellow")], pixels[:, objects.index("box")]
-    return (box[:, 1] - block[:, 1]) / labeler.grounder.data.block_width_px["tabletop"]["front"]
-
-
 def check(offsets, seeds, scripted_episodes: int, every: int, folder: str) -> dict:
     cfg = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=10000, zsrm_correct_box_area=0.0115,
                       zsrm_correct_front=True)
@@ -76,15 +64,12 @@ def check(offsets, seeds, scripted_episodes: int, every: int, folder: str) -> di
     labeler = goal_labeler(cfg, folder)
     out = {}
     for name, (tilted, front, oracle) in runs.items():
-        checked = labeler(tilted, front=front)
-        labeler.front_check = False
-        unchecked = labeler(tilted, front=front)  # its front frames read, not checked
-        labeler.front_check = True
+        unchecked, rise = labeler.read(tilted, front)  # the tilted camera's verdict and the front check's quantity
+        checked = unchecked & front_rise_ok(rise)
         row = {"frames": len(tilted), "oracle_goal": int(oracle.sum())}
         for key, said in (("tilted_only", unchecked), ("front_check", checked)):
             row[key] = {"says_goal": int(said.sum()), "false_goal": int((said & ~oracle).sum()),
                         "recall": float(said[oracle].mean()) if oracle.any() else None}
-        rise = front_rise(labeler, front)
         for key, where in (("oracle_goal", oracle), ("tilted_false_goal", unchecked & ~oracle)):
             if where.any():
                 row[f"rise_{key}_p10_p50_p90"] = [round(float(v), 3) for v in np.nanpercentile(rise[where], [10, 50, 90])]

@@ -69,10 +69,16 @@ class GoalLabeler:
         return cls(task, grounder, labelers(data, cfg, relations=(task.relation,))[scene], front_check)
 
     def __call__(self, frames: np.ndarray, front: np.ndarray | None = None) -> np.ndarray:
+        if self.front_check and (front is None or len(front) != len(frames)):
+            raise ValueError(f"the front check needs the front camera's frames of the same {len(frames)} steps")
+        holds, rise = self.read(frames, front)
+        return holds & front_rise_ok(rise) if self.front_check else holds
+
+    def read(self, frames: np.ndarray, front: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """One Grad-CAM pass: (N,) bool, the relation on the goal's camera alone, and with ``front``
+        the block's front point above the box's in block widths (:func:`front_rise_ok` reads it)."""
         frames = np.asarray(frames)  # checked by Grad-CAM (zsrm.grounding.gradcam)
         n = len(frames)
-        if self.front_check and (front is None or len(front) != n):
-            raise ValueError(f"the front check needs the front camera's frames of the same {n} steps")
         arrays = {"scene": np.zeros(n, np.int64), f"images_{self.camera}": frames,
                   **({"images_front": np.asarray(front)} if front is not None else {})}
         if self.grounder.data.has_box:
@@ -81,13 +87,17 @@ class GoalLabeler:
         present = np.broadcast_to(self.present, (n, len(self.present)))
         captions = self.labeler.captions({self.camera: pixels[self.camera]}, present)
         holds = np.array([self.task.text in c for c in captions], dtype=bool)
-        return holds & self.front_rise_ok(pixels["front"]) if self.front_check else holds
+        return holds, None if front is None else self.front_rise(pixels["front"])
 
-    def front_rise_ok(self, front: np.ndarray) -> np.ndarray:
-        """(N,) bool: the block's front Grad-CAM point (N, K, 2) sits :data:`FRONT_RISE` above the box's."""
+    def front_rise(self, front: np.ndarray) -> np.ndarray:
+        """(N,): the block's front Grad-CAM point (N, K, 2) above the box's, in block widths."""
         objects = list(self.grounder.data.objects)
         block, box = front[:, objects.index(self.task.objects[0])], front[:, objects.index(self.task.objects[1])]
         width = self.grounder.data.block_width_px[self.grounder.data.scenes[0]]["front"]
-        rise = (box[:, 1] - block[:, 1]) / width  # rows grow down
-        with np.errstate(invalid="ignore"):
-            return (rise > FRONT_RISE[0]) & (rise < FRONT_RISE[1])  # NaN (not located): False
+        return (box[:, 1] - block[:, 1]) / width  # rows grow down
+
+
+def front_rise_ok(rise: np.ndarray) -> np.ndarray:
+    """(N,) bool: the front check holds (a rise within :data:`FRONT_RISE`; NaN, not located: False)."""
+    with np.errstate(invalid="ignore"):
+        return (rise > FRONT_RISE[0]) & (rise < FRONT_RISE[1])

@@ -68,13 +68,14 @@ class CorrectedZSRMReward(ZSRMReward):
 
     def compute(self, observations, goal, infos) -> np.ndarray:
         reward = super().compute(observations, goal, infos)
-        frames = check_images(observations[self.goal_camera(goal)])
-        self.recent.append({"": np.array(frames), **{c: np.array(observations[c]) for c in self.label_cameras}})
+        camera = self.goal_camera(goal)
+        frames = check_images(observations[camera])
+        self.recent.append({camera: np.array(frames), **{c: np.array(observations[c]) for c in self.label_cameras}})
         self.seen += len(frames)
         if self.seen >= self.update_every:
             self.seen = 0
             seen = {key: np.concatenate([step[key] for step in self.recent]) for key in self.recent[0]}
-            self.learn(seen.pop(""), goal, seen)
+            self.learn(seen.pop(camera), goal, seen)
             self.recent = []
         return reward
 

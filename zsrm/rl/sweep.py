@@ -95,8 +95,8 @@ def run_trial(trial: dict) -> dict:
     if os.path.isdir(trial["cwd"]):  # Ray Tune runs a trial in a folder of its own: relative paths are the sweep's
         os.chdir(trial["cwd"])
     cfg = TrainConfig.from_dict(trial["config"])
-    record_attempt(Path(trial["root"]) / trial["name"])
     root = Path(trial["root"])
+    record_attempt(root / trial["name"])
     summary = train(cfg, root / trial["name"], progress=False, env_workers=1,  # one core per trial
                     on_eval=lambda row: tune.report({**row, "final": 0}), shared_keypoints=root / "_keypoints")
     result = {"env_steps": summary["env_steps"], "mean": summary["final_mean"], "final": 1}
