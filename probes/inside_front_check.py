@@ -1,13 +1,15 @@
-"""Does the goal labeler's front check (``--zsrm-correct-front``) stop "inside of" where a block is
-held in the air in front of the box, which the tilted camera reads as in it, and keep the true goal
-frames?
+"""Do the goal labeler's front check (``--zsrm-correct-front``) and height check
+(``--zsrm-correct-height``) stop "inside of" where a block is held in the air in front of the box,
+which the tilted camera reads as in it, and keep the true goal frames?
 
 Plays place_inside's scene with the scripted controller (the block dropped in the box: the goal)
 and with the same controller made to hold the block where it would let it go, moved ``dy`` metres
 toward the front camera (``hover-0.03``: 3 cm in front of the box, 8 cm above the table), never
 releasing it; labels every frame with the goal labeler (the box check on, as the runs use it)
-without and with the front check, and records where the front camera's block point sits above the
-box's (in block widths) on the frames the oracle calls the goal. The oracle's verdict is only
+without and with each check, and records where the front camera's block point sits above the
+box's and how high the block's triangulated centre is (both in block widths) on the frames the
+oracle calls the goal and on those the tilted camera alone calls it wrongly. The oracle reads
+inside of on the table plane: a block held over the box's centre counts; the height check does not. The oracle's verdict is only
 compared with, never read by the labeler.
 
     python probes/inside_front_check.py --out results/side/grounding/inside_front_check.json
@@ -21,7 +23,7 @@ import numpy as np
 from zsrm.common.files import write_json
 from zsrm.envs.rollout import episode_steps, make_env
 from zsrm.envs.scripted import PickPlaceController, scripted_controller
-from zsrm.grounding.goal_check import front_rise_ok
+from zsrm.grounding.goal_check import front_rise_ok, lift_ok
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.corrected import goal_labeler
 
@@ -56,7 +58,7 @@ def episode_frames(env, policy, seeds, skip: int = 5, every: int = 1):
 
 def check(offsets, seeds, scripted_episodes: int, every: int, folder: str) -> dict:
     cfg = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=10000, zsrm_correct_box_area=0.0115,
-                      zsrm_correct_front=True)
+                      zsrm_correct_front=True, zsrm_correct_height=True)
     env = make_env(GOAL, cameras=("tilted", "front"), image_size=cfg.image_size)
     runs = {f"hover{dy:+.2f}": episode_frames(env, held_in_front(dy), seeds, every=every) for dy in offsets}
     runs["scripted"] = episode_frames(env, scripted_controller, range(scripted_episodes), every=every)
@@ -64,15 +66,17 @@ def check(offsets, seeds, scripted_episodes: int, every: int, folder: str) -> di
     labeler = goal_labeler(cfg, folder)
     out = {}
     for name, (tilted, front, oracle) in runs.items():
-        unchecked, rise = labeler.read(tilted, front)  # the tilted camera's verdict and the front check's quantity
-        checked = unchecked & front_rise_ok(rise)
+        unchecked, rise, lift = labeler.read(tilted, front)  # the tilted camera's verdict and the checks' quantities
         row = {"frames": len(tilted), "oracle_goal": int(oracle.sum())}
-        for key, said in (("tilted_only", unchecked), ("front_check", checked)):
+        for key, said in (("tilted_only", unchecked), ("front_check", unchecked & front_rise_ok(rise)),
+                          ("height_check", unchecked & lift_ok(lift))):
             row[key] = {"says_goal": int(said.sum()), "false_goal": int((said & ~oracle).sum()),
                         "recall": float(said[oracle].mean()) if oracle.any() else None}
         for key, where in (("oracle_goal", oracle), ("tilted_false_goal", unchecked & ~oracle)):
-            if where.any():
-                row[f"rise_{key}_p10_p50_p90"] = [round(float(v), 3) for v in np.nanpercentile(rise[where], [10, 50, 90])]
+            for quantity, values in (("rise", rise), ("lift", lift)):
+                if where.any():
+                    row[f"{quantity}_{key}_p10_p50_p90"] = [round(float(v), 3)
+                                                            for v in np.nanpercentile(values[where], [10, 50, 90])]
         out[name] = row
     return out
 

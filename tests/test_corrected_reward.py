@@ -60,6 +60,45 @@ def test_no_update_until_the_labeler_has_seen_enough_of_both_kinds():
         CorrectedZSRMReward(student(), bar_free, update_every=0)
 
 
+def test_frames_labelled_before_training_let_the_first_update_come_before_the_policy_reaches_the_goal():
+    goal, fake = square_frames(6, False, 0), square_frames(6, True, 1)
+    labelled = (np.concatenate([goal, fake]), bar_free(np.concatenate([goal, fake])))
+    reward = CorrectedZSRMReward(student(), bar_free, update_every=4, label_frames=4, steps=2, min_each=6,
+                                 labelled=labelled)
+    reward({"front": square_frames(4, True, 2)}, GOAL)  # the policy's frames: none is the goal
+    assert reward.updates == 1 and reward.labelled_goal == 0
+    assert len(reward.banks[True]) == 6 and len(reward.banks[False]) == 6 + 4
+    for seed in range(3, 400):  # kept for good: the policy's frames never push them out
+        reward.learn(square_frames(4, True, seed), GOAL)
+    np.testing.assert_array_equal(reward.banks[True][:6], goal)
+    np.testing.assert_array_equal(reward.banks[False][:6], fake)
+
+
+def test_the_labeler_labels_exploration_renders_of_the_goals_scene_that_hold_its_objects(tmp_path):
+    from zsrm.rl.corrected import explored_labels
+    from zsrm.rl.goals import task_entry
+
+    calls = []
+
+    class Labeler:  # the goal labeler's interface: which task, which camera, does it read the front camera
+        task, camera, needs_front = task_entry("place_inside").task, "tilted", True
+
+        def __call__(self, frames, front):
+            calls.append(len(frames))
+            assert front.shape == frames.shape
+            return np.arange(len(frames)) % 2 == 0
+
+    cfg = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000, zsrm_correct_explore=40,
+                      image_size=32)
+    frames, holds = explored_labels(cfg, Labeler(), tmp_path)
+    assert 0 < len(frames) < 40 and calls == [len(frames)]  # only renders holding the yellow block and the box
+    assert frames.shape[1:] == (32, 32, 3) and holds.sum() == (len(frames) + 1) // 2
+    again = explored_labels(cfg, Labeler(), tmp_path)  # kept: a resumed run does not label again
+    assert calls == [len(frames)] and np.array_equal(again[1], holds)
+    assert explored_labels(TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000),
+                           Labeler(), tmp_path / "off") is None
+
+
 def test_the_correction_is_a_zsrm_setting_written_only_when_on():
     on = TrainConfig(goal="place_between", reward="zsrm", zsrm_correct_every=5000)
     assert on.to_dict()["zsrm_correct_every"] == 5000 and on.zsrm_correct_frames == 128
@@ -155,20 +194,37 @@ def test_the_labeler_gets_the_other_cameras_frames_of_the_steps_it_labels():
     assert seen == [5, 5] and reward.labelled == 10 and reward.updates == 2
 
 
-def test_the_front_check_is_an_inside_of_setting_and_its_training_scenes_render_the_front_camera():
+@pytest.mark.parametrize("check", ["zsrm_correct_front", "zsrm_correct_height"])
+def test_the_front_and_height_checks_are_inside_of_settings_whose_training_scenes_render_the_front_camera(check):
     from zsrm.rl.envs import make_vec
 
-    on = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000, zsrm_correct_front=True)
-    assert on.to_dict()["zsrm_correct_front"] is True
-    assert "zsrm_correct_front" not in TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000).to_dict()
+    on = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000, **{check: True})
+    assert on.to_dict()[check] is True
+    assert check not in TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000).to_dict()
     for other in ({"reward": "oracle"}, {"zsrm_correct_every": 0}, {"goal": "stack"}):  # read only by the correction
-        assert not TrainConfig(**{**on.to_dict(), **other}).zsrm_correct_front
+        assert not getattr(TrainConfig(**{**on.to_dict(), **other}), check)
     train, evaluate = make_vec(on, 1, 0, training=True), make_vec(on, 1, 0)
     assert set(train.observation_space.spaces) == {"tilted", "front"} and set(evaluate.observation_space.spaces) == {"tilted"}
     train.close(), evaluate.close()
 
 
-def test_the_front_check_stops_inside_of_for_a_block_held_in_front_of_the_box(tmp_path, monkeypatch):
+def test_two_cameras_rays_meet_at_the_world_point_both_see():
+    import gymnasium as gym
+
+    import zsrm.envs  # noqa: F401
+    from zsrm.envs.cameras import pixel_rays, project, triangulate
+
+    env = gym.make("zsrm/Tabletop-v0", task="stack", cameras=("front", "tilted"), image_size=64).unwrapped
+    points = np.random.default_rng(0).uniform([-0.2, -0.1, 0.42], [0.2, 0.1, 0.55], (6, 3))
+    tilted, front = project(env, "tilted", points, 64), project(env, "front", points, 64)
+    tilted[0] = np.nan  # not located on one camera: no point
+    found = triangulate(pixel_rays(env, "tilted", 64), tilted, pixel_rays(env, "front", 64), front)
+    env.close()
+    assert np.isnan(found[0]).all()
+    np.testing.assert_allclose(found[1:], points[1:], atol=1e-9)
+
+
+def test_the_front_and_height_checks_stop_inside_of_for_a_block_held_in_front_of_the_box(tmp_path, monkeypatch):
     import json
 
     from test_distill import run_probe
@@ -183,7 +239,10 @@ def test_the_front_check_stops_inside_of_for_a_block_held_in_front_of_the_box(tm
     assert held["front_check"]["false_goal"] < 0.1 * held["frames"]
     assert scripted["oracle_goal"] >= 5 and scripted["front_check"]["recall"] >= 0.8
     assert scripted["front_check"]["recall"] == scripted["tilted_only"]["recall"]  # no goal frame lost here
+    # held 8 cm up, the block's triangulated centre is far above a resting one's; dropped in the box it is not
+    assert held["height_check"]["false_goal"] == 0 and held["lift_tilted_false_goal_p10_p50_p90"][0] > 0.6
+    assert scripted["height_check"]["recall"] >= 0.8 and scripted["lift_oracle_goal_p10_p50_p90"][2] < 0.4
     labeler = goal_labeler(TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000,
-                                       zsrm_correct_front=True), tmp_path / "calib")
+                                       zsrm_correct_height=True), tmp_path / "calib")
     with pytest.raises(ValueError, match="front camera's frames"):
         labeler(np.zeros((2, 64, 64, 3), np.uint8))

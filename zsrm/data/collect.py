@@ -183,6 +183,23 @@ def table_homographies(cfg: CollectConfig) -> dict[str, dict[str, list]]:
         envs.close()
 
 
+def camera_rays(cfg: CollectConfig) -> dict[str, dict]:
+    """Per zsrm scene (calibration only): each camera's :func:`~zsrm.envs.cameras.pixel_rays`
+    (``rays``), the height of a resting object's centre (``rest_z``) and an object's width (``width``), m."""
+    from zsrm.envs.base import TABLE_TOP
+    from zsrm.envs.cameras import pixel_rays
+
+    if cfg.adapter is not None:
+        raise ValueError("camera rays are read from zsrm's scenes, not an adapter's")
+    envs = _Envs(cfg)
+    try:
+        return {s: {"rays": {c: pixel_rays(env, c, cfg.image_size) for c in cfg.cameras},
+                    "rest_z": TABLE_TOP + env.rest_height, "width": 2 * env.object_half_size}
+                for s in cfg.scenes for env in (envs.get(s, cfg.colours[:2]),)}
+    finally:
+        envs.close()
+
+
 def collect_shard(cfg: CollectConfig, index: int, envs: _Envs | None = None) -> dict[str, np.ndarray]:
     """The arrays of shard ``index``: a function of ``cfg`` and ``index`` only."""
     from zsrm.envs.cameras import project

@@ -104,6 +104,33 @@ def apply_homography(h, xy) -> np.ndarray:
     return out[..., :2] / out[..., 2:]
 
 
+def pixel_rays(env, camera: str, size: int) -> dict[str, list]:
+    """Calibration, not state: the camera's centre (``origin``, 3) and the 3x3 ``direction`` map taking
+    pixel coordinates ``(x, row, 1)`` to the world direction of the ray through that pixel
+    (:func:`triangulate` reads two cameras' rays). JSON-ready."""
+    pos, rot, fovy = camera_frame(env, camera)
+    focal = 0.5 * size / np.tan(np.deg2rad(fovy) / 2)
+    c = 0.5 * size - 0.5
+    to_axes = np.array([[1.0, 0.0, -c], [0.0, -1.0, c], [0.0, 0.0, -focal]]) / focal  # see project
+    return {"origin": pos.tolist(), "direction": (rot @ to_axes).tolist()}
+
+
+def triangulate(rays_a: dict, xy_a, rays_b: dict, xy_b) -> np.ndarray:
+    """``(N, 3)`` world points seen at pixels ``xy_a`` (N, 2) of one camera and ``xy_b`` of another
+    (their :func:`pixel_rays`): the midpoint of the two rays' closest approach; NaN where a pixel is."""
+    def ray(rays, xy):
+        xy = np.asarray(xy, np.float64)
+        d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1) @ np.asarray(rays["direction"]).T
+        return np.asarray(rays["origin"], np.float64), d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    (pa, da), (pb, db) = ray(rays_a, xy_a), ray(rays_b, xy_b)
+    w, b = pa - pb, np.sum(da * db, axis=-1)
+    d, e = da @ w, db @ w
+    with np.errstate(divide="ignore", invalid="ignore"):  # unit directions; parallel rays give NaN
+        s, t = (b * e - d) / (1 - b * b), (e - b * d) / (1 - b * b)
+    return 0.5 * (pa + s[..., None] * da + pb + t[..., None] * db)
+
+
 def object_pixels(env, cameras=CAMERAS, size: int | None = None) -> dict[str, dict[str, np.ndarray]]:
     """True pixel coordinates of every object of a scene: ``{camera: {colour: (x, row)}}``."""
     base = getattr(env, "unwrapped", env)

@@ -40,6 +40,9 @@ class CorrectedZSRMReward(ZSRMReward):
     update_every: frames between updates; each labels ``label_frames`` of the frames seen since the
                   last one (drawn at random) and takes ``steps`` Adam steps on batches of half
                   labelled goal frames, half others, from the latest ``memory`` of each.
+    labelled:     (frames, verdicts) the labeler gave before training (exploration renders): kept in
+                  the banks for good, so that the first update need not wait for the policy to
+                  reach the goal (a policy held by a fooled reward may never reach it).
     Updates wait until ``min_each`` of each kind have been labelled. ``on_update(model)`` runs after each update (the
     run keeps the latest model, so a resumed run starts from it). Only the image side learns: the
     goal's text embeddings stay those cached at the start. The loss is the goal's probability
@@ -51,7 +54,8 @@ class CorrectedZSRMReward(ZSRMReward):
     def __init__(self, model, labeler: Callable[[np.ndarray], np.ndarray], update_every: int,
                  label_frames: int = 128, steps: int = 50, memory: int = 4096, batch_size: int = 64,
                  lr: float = 1e-4, min_each: int = 16, seed: int = 0, on_update=None,
-                 label_cameras: tuple[str, ...] = (), **kwargs):
+                 label_cameras: tuple[str, ...] = (), labelled: tuple[np.ndarray, np.ndarray] | None = None,
+                 **kwargs):
         super().__init__(model, **kwargs)
         if min(update_every, label_frames, steps, memory, batch_size) < 1:
             raise ValueError(f"update_every, label_frames, steps, memory and batch_size must be >= 1, got "
@@ -61,6 +65,10 @@ class CorrectedZSRMReward(ZSRMReward):
         self.rng = np.random.default_rng(seed)
         self.label_cameras = tuple(label_cameras)  # cameras the labeler reads beside the goal's
         self.banks: dict[bool, FrameBank] = {}
+        if labelled is not None:
+            frames, holds = np.asarray(labelled[0]), np.asarray(labelled[1], dtype=bool)
+            self.banks = {kind: FrameBank(frames[holds == kind], self.memory) for kind in (True, False)
+                          if (holds == kind).any()}
         self.recent: list[dict[str, np.ndarray]] = []
         self.seen = self.updates = self.labelled = self.labelled_goal = 0
         self.opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=lr)

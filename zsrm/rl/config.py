@@ -142,6 +142,16 @@ class TrainConfig:
     sits a little above the box's (zsrm.grounding.goal_check.FRONT_RISE); on the tilted camera a block
     held in the air in front of the box reads as one in it (the policy and the reward read the tilted
     camera alone)"""
+    zsrm_correct_explore: int = 0
+    """--reward zsrm with zsrm_correct_every: before training the labeler labels this many exploration
+    renders of the goal's scene (zsrm collect's, cached in the run folder), and those that hold the
+    goal's objects stay in its banks for good: the first update then need not wait for the policy to
+    reach the goal, and a fooled reward is corrected from the first update on; 0: none"""
+    zsrm_correct_height: bool = False
+    """--reward zsrm with zsrm_correct_every, inside of the box: the training scenes render the front
+    camera too, for the labeler alone, and inside of holds only where the block's centre, triangulated
+    from its Grad-CAM points on the tilted and front cameras, is at most half a block width above a
+    resting block's (zsrm.grounding.goal_check.LIFT_MAX): a block held in the air does not count"""
     vice_update_every: int = 4000
     """--reward vice: every this many env steps the goal classifier takes 50 Adam steps on the
     policy's latest frames beside the frames it was fitted on, as Fu et al. (2018) train VICE
@@ -167,7 +177,7 @@ class TrainConfig:
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
              "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0,
              "near_start": 0.0, "zsrm_correct_every": 0, "zsrm_correct_frames": 128,
-             "zsrm_correct_box_area": 0.0, "zsrm_correct_front": False, "pair_scale": 0.0, "pixel_stride": 4, "learner": "ppo",
+             "zsrm_correct_box_area": 0.0, "zsrm_correct_front": False, "zsrm_correct_height": False, "zsrm_correct_explore": 0, "pair_scale": 0.0, "pixel_stride": 4, "learner": "ppo",
              "pretrain_episodes": 320, "pretrain_steps": 4000}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
@@ -193,10 +203,11 @@ class TrainConfig:
         self.check_policy_settings()
         if self.lift_ceiling < 0:
             raise ValueError(f"lift_ceiling must be >= 0 (0: the workspace's top), got {self.lift_ceiling}")
-        if self.zsrm_correct_every < 0 or self.zsrm_correct_frames < 1 or self.zsrm_correct_box_area < 0:
-            raise ValueError(f"zsrm_correct_every and zsrm_correct_box_area must be >= 0 (0: off) and "
-                             f"zsrm_correct_frames >= 1, got {self.zsrm_correct_every}, "
-                             f"{self.zsrm_correct_box_area} and {self.zsrm_correct_frames}")
+        if min(self.zsrm_correct_every, self.zsrm_correct_box_area, self.zsrm_correct_explore) < 0 \
+                or self.zsrm_correct_frames < 1:
+            raise ValueError(f"zsrm_correct_every, zsrm_correct_box_area and zsrm_correct_explore must be >= 0 "
+                             f"(0: off) and zsrm_correct_frames >= 1, got {self.zsrm_correct_every}, "
+                             f"{self.zsrm_correct_box_area}, {self.zsrm_correct_explore} and {self.zsrm_correct_frames}")
         if self.vice_update_every < 0:
             raise ValueError(f"vice_update_every must be >= 0 (0: a fixed classifier), got {self.vice_update_every}")
         if self.target_kl < 0:
@@ -255,9 +266,12 @@ class TrainConfig:
             self.zsrm_correct_frames = self.ADDED["zsrm_correct_frames"]
             self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
             self.zsrm_correct_front = self.ADDED["zsrm_correct_front"]
+            self.zsrm_correct_height = self.ADDED["zsrm_correct_height"]
+            self.zsrm_correct_explore = self.ADDED["zsrm_correct_explore"]
         if not goal_has_box(self.goal, self.scene):  # only the box is checked
             self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
             self.zsrm_correct_front = self.ADDED["zsrm_correct_front"]
+            self.zsrm_correct_height = self.ADDED["zsrm_correct_height"]
         if self.reward == "random":  # uniform random actions: no policy network reads its inputs
             self.pair_scale = self.ADDED["pair_scale"]
             self.pixel_stride = self.ADDED["pixel_stride"]
@@ -390,6 +404,10 @@ TASK_PRESETS: dict[str, dict[str, dict]] = {
         "in_between": {"steps": 500_000, "zsrm_correct_every": 10_000},
         "in_front_of": {"steps": 500_000, "zsrm_correct_every": 10_000},
         "behind": {"steps": 500_000},
+        # a longer horizon, and the correction whose labeler reads the block's height (a block held
+        # in the air fooled the tilted camera) and starts from labelled exploration renders
+        "inside_of": {"steps": 500_000, "gamma": 0.99, "zsrm_correct_every": 10_000, "zsrm_correct_box_area": 0.0115,
+                      "zsrm_correct_height": True, "zsrm_correct_explore": 1024},
     },
 }
 PRESETS["per-task"] = {}

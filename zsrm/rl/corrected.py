@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from zsrm.common.files import read_json, write_json
 from zsrm.fullmodel import load_reward_backbone
 from zsrm.grounding.annotate import BOX_VLM, DEFAULT_VLM
@@ -21,15 +23,49 @@ from zsrm.tasks.lexicon import BOX
 from zsrm.vlm import load_vlm
 
 
+def labeler_scene(cfg: TrainConfig) -> str:
+    """The zsrm scene (tabletop or pushing) of ``cfg.goal``'s task."""
+    env_id = task_entry(cfg.goal).env_id
+    return next(name for name, scene_id in SCENE_IDS.items() if scene_id == env_id)
+
+
 def goal_labeler(cfg: TrainConfig, folder: str | Path) -> GoalLabeler:
     """The labeler of ``cfg.goal`` in its task scene, read through ``cfg.vlm`` (and the box-aware
     scene VLM for a goal with the box, as ``zsrm label`` reads the box), calibrated into ``folder``."""
     entry = task_entry(cfg.goal)
-    scene = next(name for name, env_id in SCENE_IDS.items() if env_id == entry.env_id)
+    scene = labeler_scene(cfg)
     box_vlm = load_vlm(BOX_VLM) if cfg.vlm == DEFAULT_VLM and BOX in entry.task.objects else None
     return GoalLabeler.calibrated(entry.task, scene, cfg.image_size, folder, load_vlm(cfg.vlm), vlm_spec=cfg.vlm,
                                   box_vlm=box_vlm, box_min_area=cfg.zsrm_correct_box_area,
-                                  front_check=cfg.zsrm_correct_front)
+                                  front_check=cfg.zsrm_correct_front, height_check=cfg.zsrm_correct_height)
+
+
+def explored_labels(cfg: TrainConfig, labeler: GoalLabeler, folder: str | Path):
+    """``cfg.zsrm_correct_explore`` exploration renders of the goal's scene (collected into ``folder``
+    once), those holding the goal's objects, and the labeler's verdicts on them (kept beside them);
+    None when the setting is 0. Which objects a render holds is what ``zsrm label`` reads too."""
+    if not cfg.zsrm_correct_explore:
+        return None
+    folder = Path(folder)
+    kept = folder / "labelled.npz"
+    if kept.is_file():
+        with np.load(kept) as done:
+            return done["frames"], done["holds"]
+    from zsrm.data.collect import CollectConfig, collect
+    from zsrm.tasks.language import COLOURS
+
+    task, camera = labeler.task, labeler.camera
+    cameras = (camera, "front") if labeler.needs_front and camera != "front" else (camera,)
+    data = collect(CollectConfig(images=cfg.zsrm_correct_explore, shard_size=min(cfg.zsrm_correct_explore, 256),
+                                 scenes=(labeler_scene(cfg),), cameras=cameras, image_size=cfg.image_size,
+                                 p_box=0.5 if task.has_container else 0.0), folder, progress=False).load()
+    hold = data["present"][:, [COLOURS.index(c) for c in task.objects if c in COLOURS]].all(axis=1)
+    if task.has_container:
+        hold &= data["box_present"]
+    frames = data[f"images_{camera}"][hold]
+    holds = labeler(frames, **({"front": data["images_front"][hold]} if labeler.needs_front else {}))
+    np.savez(kept, frames=frames, holds=holds)
+    return frames, holds
 
 
 def corrected_reward(cfg: TrainConfig, out: str | Path) -> CorrectedZSRMReward:
@@ -41,7 +77,8 @@ def corrected_reward(cfg: TrainConfig, out: str | Path) -> CorrectedZSRMReward:
     model = load_reward_backbone(latest if (latest / "config.json").is_file() else cfg.reward_model)
     reward = CorrectedZSRMReward(model, labeler, update_every=max(1, cfg.zsrm_correct_every // cfg.action_repeat),
                                  label_frames=cfg.zsrm_correct_frames, seed=cfg.seed, output=cfg.zsrm_output,
-                                 label_cameras=("front",) if labeler.front_check else ())
+                                 label_cameras=("front",) if labeler.needs_front else (),
+                                 labelled=explored_labels(cfg, labeler, out / "goal_labeler_explore"))
     if (latest / "corrections.json").is_file():  # a resumed run counts on from what it had done
         done = read_json(latest / "corrections.json", "the corrected reward's counts")
         reward.updates, reward.labelled, reward.labelled_goal = done["updates"], done["labelled"], done["labelled_goal"]

@@ -34,7 +34,8 @@ def make_vec(cfg: TrainConfig, n_envs: int, seed: int, spread: str = "seen",
         return make_scene_vec(cfg, n_envs, seed, spread, distractors, workers)
     entry = task_entry(cfg.goal)
     # the front camera for the corrected reward's labeler alone (the policy and the reward read the goal's)
-    front = ("front",) if training and cfg.zsrm_correct_front and goal_camera(cfg.goal) != "front" else ()
+    labels_front = cfg.zsrm_correct_front or cfg.zsrm_correct_height
+    front = ("front",) if training and labels_front and goal_camera(cfg.goal) != "front" else ()
     kwargs = dict(task=entry.goal, cameras=(goal_camera(cfg.goal), *front), image_size=cfg.image_size,
                   action_repeat=cfg.action_repeat)
     if cfg.choice:
