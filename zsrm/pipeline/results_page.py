@@ -360,10 +360,11 @@ SIDE = [
      "(--zsrm-correct-every 10000 --zsrm-correct-box-area 0.0115 --gamma 0.99, seed 1; scored 19.7): the reward pays "
      "in 0.72 of decisions, the oracle in 0.21; the block held 8 cm up over the box, which the goal labeler on the "
      "tilted camera calls inside of in 0.57 of those frames (height and depth look alike there)"),
-    ("side/grounding/inside_front_check.json", "the goal labeler's front check (--zsrm-correct-front) on place_inside "
-     "frames of the block held 8 cm up, 0-4 cm in front of the box, never let go (4 episodes each): the tilted "
-     "camera's labeler says inside of in 149 and 222 of 384 frames at 4 and 3 cm, 73 and 144 with the check; the "
-     "scripted goal frames' recall 0.94, 0.91 with it (probes/inside_front_check.py)"),
+    ("side/grounding/inside_front_check.json", "the goal labeler's front check (--zsrm-correct-front) and height "
+     "check (--zsrm-correct-height) on place_inside frames of the block held 8 cm up, 0-4 cm in front of the box, "
+     "never let go (4 episodes each): the tilted camera's labeler says inside of in 149 and 222 of 384 frames at 4 "
+     "and 3 cm, 73 and 144 with the front check, 0 with the height check (none of the 1536 held frames); the "
+     "scripted goal frames' recall 0.94, 0.91 and 0.91 (probes/inside_front_check.py)"),
     ("side/rl/push_close_ends.json", "a push_close oracle policy (500k, seed 0) by start side, and its 20 of 30 "
      "episodes that never succeed: the pucks end 14.5 cm apart (close to: under 10), the nearest 14.3: the push "
      "stops short (probes/push_sides.py)"),
