@@ -208,6 +208,14 @@ def test_the_front_and_height_checks_are_inside_of_settings_whose_training_scene
     train.close(), evaluate.close()
 
 
+def test_the_height_checks_ceiling_is_read_only_with_the_height_check():
+    on = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=5000, zsrm_correct_height=True,
+                     zsrm_correct_lift_max=0.67)
+    assert on.to_dict()["zsrm_correct_lift_max"] == 0.67
+    assert "zsrm_correct_lift_max" not in TrainConfig(**{**on.to_dict(), "zsrm_correct_lift_max": 0.5}).to_dict()
+    assert TrainConfig(**{**on.to_dict(), "zsrm_correct_height": False}).zsrm_correct_lift_max == 0.5
+
+
 def test_two_cameras_rays_meet_at_the_world_point_both_see():
     import gymnasium as gym
 

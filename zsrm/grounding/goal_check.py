@@ -55,9 +55,9 @@ class GoalLabeler:
     check (:data:`LIFT_MAX`) agree."""
 
     def __init__(self, task: Task, grounder: Grounder, labeler: SpatialLabeler, front_check: bool = False,
-                 height: dict | None = None):
+                 height: dict | None = None, lift_max: float = LIFT_MAX):
         self.task, self.grounder, self.camera = task, grounder, RELATIONS[task.relation].camera
-        self.labeler, self.front_check, self.height = labeler, bool(front_check), height
+        self.labeler, self.front_check, self.height, self.lift_max = labeler, bool(front_check), height, float(lift_max)
         if self.needs_front and (task.relation != "inside_of" or "front" not in grounder.data.cameras):
             raise ValueError(f"the front and height checks read inside of on calibration data with the front "
                              f"camera; {task.text!r} is {task.relation}, the data has {', '.join(grounder.data.cameras)}")
@@ -75,11 +75,12 @@ class GoalLabeler:
     @classmethod
     def calibrated(cls, task: Task, scene: str, image_size: int, folder: str | Path, vlm, vlm_spec: str = "scene",
                    box_vlm=None, box_min_area: float = 0.0, front_check: bool = False,
-                   height_check: bool = False) -> "GoalLabeler":
+                   height_check: bool = False, lift_max: float = LIFT_MAX) -> "GoalLabeler":
         """Calibrated on ``CALIBRATION_IMAGES`` exploration renders of ``scene`` (a zsrm scene name:
         tabletop or pushing) at ``image_size``, collected into ``folder`` (once). ``box_min_area``:
         a box point whose silhouette covers less of the table (square metres) is not the box (see
-        :class:`~zsrm.grounding.annotate.Grounder`); ``front_check``, ``height_check``: see the class."""
+        :class:`~zsrm.grounding.annotate.Grounder`); ``front_check``, ``height_check`` (with
+        ``lift_max``, block widths): see the class."""
         if scene not in SCENE_IDS:
             raise ValueError(f"unknown scene {scene!r}; the goal labeler reads zsrm's scenes: {', '.join(SCENE_IDS)}")
         camera = RELATIONS[task.relation].camera
@@ -91,14 +92,15 @@ class GoalLabeler:
         cfg = LabelConfig(vlm=vlm_spec)
         grounder = Grounder(vlm, cfg, data, box_vlm=box_vlm, box_min_area=box_min_area)
         height = camera_rays(collect_cfg)[scene] if height_check else None
-        return cls(task, grounder, labelers(data, cfg, relations=(task.relation,))[scene], front_check, height)
+        return cls(task, grounder, labelers(data, cfg, relations=(task.relation,))[scene], front_check, height,
+                   lift_max)
 
     def __call__(self, frames: np.ndarray, front: np.ndarray | None = None) -> np.ndarray:
         if self.needs_front and (front is None or len(front) != len(frames)):
             raise ValueError(f"the front and height checks need the front camera's frames of the same {len(frames)} steps")
         reading = self.read(frames, front)
         holds = reading.holds & front_rise_ok(reading.rise) if self.front_check else reading.holds
-        return holds & lift_ok(reading.lift) if self.height is not None else holds
+        return holds & lift_ok(reading.lift, self.lift_max) if self.height is not None else holds
 
     def read(self, frames: np.ndarray, front: np.ndarray | None = None) -> Reading:
         """One Grad-CAM pass: the relation on the goal's camera alone, and with ``front`` the block's
@@ -143,7 +145,7 @@ def front_rise_ok(rise: np.ndarray) -> np.ndarray:
         return (rise > FRONT_RISE[0]) & (rise < FRONT_RISE[1])
 
 
-def lift_ok(lift: np.ndarray) -> np.ndarray:
-    """(N,) bool: the height check holds (a lift below :data:`LIFT_MAX`; NaN, not located: False)."""
+def lift_ok(lift: np.ndarray, lift_max: float = LIFT_MAX) -> np.ndarray:
+    """(N,) bool: the height check holds (a lift below ``lift_max``; NaN, not located: False)."""
     with np.errstate(invalid="ignore"):
-        return lift < LIFT_MAX
+        return lift < lift_max

@@ -152,6 +152,9 @@ class TrainConfig:
     camera too, for the labeler alone, and inside of holds only where the block's centre, triangulated
     from its Grad-CAM points on the tilted and front cameras, is at most half a block width above a
     resting block's (zsrm.grounding.goal_check.LIFT_MAX): a block held in the air does not count"""
+    zsrm_correct_lift_max: float = 0.5
+    """--reward zsrm with zsrm_correct_height: the highest the block's centre may be, in block widths
+    above a resting block's (0.67: a block held low in the box, its bottom under the walls' top, counts)"""
     vice_update_every: int = 4000
     """--reward vice: every this many env steps the goal classifier takes 50 Adam steps on the
     policy's latest frames beside the frames it was fitted on, as Fu et al. (2018) train VICE
@@ -177,7 +180,7 @@ class TrainConfig:
              "target_kl": 0.0, "anneal_lr": False, "scene": None, "log_std_init": 0.0, "vice_update_every": 0,
              "vice_oracle_labels": False, "augment_shift": 0, "lift_ceiling": 0.0,
              "near_start": 0.0, "zsrm_correct_every": 0, "zsrm_correct_frames": 128,
-             "zsrm_correct_box_area": 0.0, "zsrm_correct_front": False, "zsrm_correct_height": False, "zsrm_correct_explore": 0, "pair_scale": 0.0, "pixel_stride": 4, "learner": "ppo",
+             "zsrm_correct_box_area": 0.0, "zsrm_correct_front": False, "zsrm_correct_height": False, "zsrm_correct_explore": 0, "zsrm_correct_lift_max": 0.5, "pair_scale": 0.0, "pixel_stride": 4, "learner": "ppo",
              "pretrain_episodes": 320, "pretrain_steps": 4000}
     # What a file without the setting means, where that is not the default: a run made before the
     # setting existed (read by from_dict and by zsrm.common.registry.parse_fields, e.g. a saved policy)
@@ -272,6 +275,8 @@ class TrainConfig:
             self.zsrm_correct_box_area = self.ADDED["zsrm_correct_box_area"]
             self.zsrm_correct_front = self.ADDED["zsrm_correct_front"]
             self.zsrm_correct_height = self.ADDED["zsrm_correct_height"]
+        if not self.zsrm_correct_height:
+            self.zsrm_correct_lift_max = self.ADDED["zsrm_correct_lift_max"]
         if self.reward == "random":  # uniform random actions: no policy network reads its inputs
             self.pair_scale = self.ADDED["pair_scale"]
             self.pixel_stride = self.ADDED["pixel_stride"]

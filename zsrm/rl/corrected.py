@@ -37,7 +37,8 @@ def goal_labeler(cfg: TrainConfig, folder: str | Path) -> GoalLabeler:
     box_vlm = load_vlm(BOX_VLM) if cfg.vlm == DEFAULT_VLM and BOX in entry.task.objects else None
     return GoalLabeler.calibrated(entry.task, scene, cfg.image_size, folder, load_vlm(cfg.vlm), vlm_spec=cfg.vlm,
                                   box_vlm=box_vlm, box_min_area=cfg.zsrm_correct_box_area,
-                                  front_check=cfg.zsrm_correct_front, height_check=cfg.zsrm_correct_height)
+                                  front_check=cfg.zsrm_correct_front, height_check=cfg.zsrm_correct_height,
+                                  lift_max=cfg.zsrm_correct_lift_max)
 
 
 def explored_labels(cfg: TrainConfig, labeler: GoalLabeler, folder: str | Path):
