@@ -360,6 +360,11 @@ SIDE = [
      "(--zsrm-correct-every 10000 --zsrm-correct-box-area 0.0115 --gamma 0.99, seed 1; scored 19.7): the reward pays "
      "in 0.72 of decisions, the oracle in 0.21; the block held 8 cm up over the box, which the goal labeler on the "
      "tilted camera calls inside of in 0.57 of those frames (height and depth look alike there)"),
+    ("side/rl/reward_hacking_place_inside_height.json", "a place_inside zsrm policy trained with the height check "
+     "and labelled exploration renders (--zsrm-correct-height --zsrm-correct-explore 1024, seed 2; scored 21.3): the "
+     "reward pays in 0.05 of decisions, the oracle in 0.21; where only the oracle pays the block is held 5.7 cm up "
+     "(its centre), 0.6 cm off the box's centre: low in the box, not let go, which the oracle reads on the table "
+     "plane as inside of and a ceiling of half a block width does not"),
     ("side/grounding/inside_front_check.json", "the goal labeler's front check (--zsrm-correct-front) and height "
      "check (--zsrm-correct-height) on place_inside frames of the block held 8 cm up, 0-4 cm in front of the box, "
      "never let go (4 episodes each): the tilted camera's labeler says inside of in 149 and 222 of 384 frames at 4 "
