@@ -412,7 +412,7 @@ TASK_PRESETS: dict[str, dict[str, dict]] = {
         # a longer horizon, and the correction whose labeler reads the block's height (a block held
         # in the air fooled the tilted camera) and starts from labelled exploration renders
         "inside_of": {"steps": 500_000, "gamma": 0.99, "zsrm_correct_every": 10_000, "zsrm_correct_box_area": 0.0115,
-                      "zsrm_correct_height": True, "zsrm_correct_explore": 1024},
+                      "zsrm_correct_height": True, "zsrm_correct_lift_max": 0.67, "zsrm_correct_explore": 1024},
     },
 }
 PRESETS["per-task"] = {}
