@@ -85,10 +85,12 @@ results: setup
 	OMP_NUM_THREADS=1 $(PY) benchmarks/train_profile.py --out results/rl/profile.json
 	OMP_NUM_THREADS=1 $(PY) benchmarks/ppo_speed.py --out results/ppo_speed.json
 	# The default learner (v3) on the nine relations' tasks, 3 seeds (81 trials, about 6 core-hours)
-	$(VENV)/bin/zsrm sweep --root runs/rl-v3 --out results/rl/learning.json
-	# Each task's own learner (--config per-task, issue 52; trials of the sweeps they share settings with are kept in
-	# results/rl/per-task/trials/), and SAC on pretrained keypoints on the nine tasks (about 20 core-minutes a trial)
-	$(VENV)/bin/zsrm sweep --config per-task --root runs/rl-per-task --out results/rl/per-task/learning.json
+	$(VENV)/bin/zsrm sweep --root runs/rl-v3 --out results/rl/v3/learning.json --trials-dir results/rl/trials
+	# Each task's own learner (--config per-task, issue 52: results/rl/learning.json; trials of the sweeps they share
+	# settings with are kept in results/rl/per-task/trials/), and SAC on pretrained keypoints on the nine tasks (about
+	# 20 core-minutes a trial)
+	$(VENV)/bin/zsrm sweep --config per-task --root runs/rl-per-task --out results/rl/learning.json \
+		--trials-dir results/rl/per-task/trials
 	$(VENV)/bin/zsrm sweep --config sac --steps 500000 --tasks place_inside push_close place_between place_front \
 		place_behind stack place_left place_right place_below --rewards zsrm oracle random --seeds 0 1 2 \
 		--root runs/rl-sac --out results/rl/sac/learning.json

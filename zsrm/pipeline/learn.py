@@ -123,6 +123,7 @@ class Sweep:
     address: str | None = None  # a Ray cluster to join instead (auto, or ray://HOST:PORT)
     reward_model: str = "student"  # the zsrm reward's model folder, or student (the shipped one)
     out: str = "results/rl/learning.json"  # the gathered summary; the plot beside it (.png), trials in trials/
+    trials_dir: str | None = None  # where the finished trials' summaries are kept (default: trials/ beside --out)
     gather_only: bool = False  # train nothing: gather the trials finished so far (e.g. while a sweep runs)
     vlm: str = "scene"  # the VLM whose image trunk the policies read (a folder pretrained by zsrm pretrain-vlm)
     init_root: str | None = None  # start each trial from the policy of the trial of its name under here
@@ -141,12 +142,13 @@ class Sweep:
         check_writable(self.root, folder=True)
         check_writable(self.out)
         out = Path(self.out)
+        kept_dir = Path(self.trials_dir) if self.trials_dir else out.parent / "trials"
         if not self.gather_only:
             ran = sweep(self.root, self.tasks, self.rewards, self.seeds, self.overrides, num_cpus=self.num_cpus,
-                        address=self.address, kept=out.parent / "trials", init_root=self.init_root)
+                        address=self.address, kept=kept_dir, init_root=self.init_root)
             print(f"ran {len(ran)} trial(s); the others were finished already")
         trials = self.trials()
-        kept = keep_trial_summaries(self.root, out.parent / "trials", trials)
+        kept = keep_trial_summaries(self.root, kept_dir, trials)
         if not kept:
             print("no finished trials yet")
             return 0
@@ -180,7 +182,7 @@ class Sweep:
                              "most 100 control steps" if "pendulum" in self.tasks else ""),
                 "command": f"zsrm sweep --tasks {shlex.join(self.tasks)} --rewards {' '.join(self.rewards)} "
                            f"--seeds {' '.join(map(str, self.seeds))}" + (f" --steps {self.steps}" if self.steps else "")
-                           + f" --out {self.out}"
+                           + f" --out {self.out}" + (f" --trials-dir {self.trials_dir}" if self.trials_dir else "")
                            + (f" --config {self.config}" if self.config != "cpu" else "")
                            + (f" --settings {shlex.join(self.settings)}" if self.settings else "")
                            + (f" --root {self.root}" if self.root != "runs/rl" else "")

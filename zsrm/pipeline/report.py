@@ -130,13 +130,13 @@ def demo_result(log: list[dict], wall_s: float, task: str, config: str = "cpu") 
 
 
 # The committed sweep of each learner preset a demo can run: where its seeds ended.
-LEARNING_BY_CONFIG = {"cpu": RESULTS / "rl" / "learning.json", "v2": RESULTS / "rl" / "v2" / "learning.json"}
+LEARNING_BY_CONFIG = {"cpu": RESULTS / "rl" / "v3" / "learning.json", "v2": RESULTS / "rl" / "v2" / "learning.json"}
 LEARNING_BY_CONFIG["v3"] = LEARNING_BY_CONFIG["cpu"]  # the default learner since 2026-12-06
 
 
 def expected_range(task: str, reward: str = "zsrm", learning: Path | None = LEARNING_BY_CONFIG["cpu"]) -> dict | None:
     """Where a run of ``task`` with ``reward`` is expected to end: the committed seeds' mean +- two
-    standard deviations (the default learner's: results/rl/learning.json). Float results move
+    standard deviations (the default learner's: results/rl/v3/learning.json). Float results move
     across CPUs, so another machine's run lands somewhere in the seeds' spread, not on one number."""
     if learning is None or not learning.is_file():
         return None
