@@ -5,6 +5,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -137,3 +138,26 @@ def test_the_per_task_preset_gives_each_task_its_own_learner():
     own = Sweep(config="per-task", tasks=("a red cylinder behind a purple cylinder",), rewards=("oracle",), seeds=(0,),
                 scene="examples.own_scene.adapter:OwnScene").trials()[0]["config"]
     assert own["steps"] == 300_000
+
+
+def test_a_sweep_keeps_its_trials_where_trials_dir_says_and_the_canonical_file_matches_the_preset(tmp_path):
+    import shutil
+
+    from zsrm.pipeline.learn import Sweep
+
+    results = Path(__file__).resolve().parents[1] / "results" / "rl"
+    kept = results / "per-task" / "trials"
+    for name in ("place_inside-random-0", "place_inside-oracle-0"):  # as the sweep's root would hold them
+        (tmp_path / "root" / name).mkdir(parents=True)
+        shutil.copy(kept / f"{name}.json", tmp_path / "root" / name / "summary.json")
+    sweep = Sweep(tasks=("place_inside",), rewards=("oracle", "random"), seeds=(0,), config="per-task",
+                  root=str(tmp_path / "root"), out=str(tmp_path / "out" / "learning.json"),
+                  trials_dir=str(tmp_path / "kept"), gather_only=True)
+    assert sweep.run() == 0
+    assert sorted(p.name for p in (tmp_path / "kept").iterdir()) == ["place_inside-oracle-0.json",
+                                                                    "place_inside-random-0.json"]
+    assert not (tmp_path / "out" / "trials").exists()
+    result = json.loads((tmp_path / "out" / "learning.json").read_text())
+    assert f"--trials-dir {tmp_path / 'kept'}" in result["meta"]["command"]
+    committed = json.loads((results / "learning.json").read_text())
+    assert result["place_inside"]["oracle"]["final_mean"] == committed["place_inside"]["oracle"]["final_per_seed"][0]
