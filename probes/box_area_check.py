@@ -15,13 +15,12 @@ import argparse
 
 import numpy as np
 
-from zsrm.common.files import write_json
-from zsrm.envs.rollout import episode_steps, make_env
+from inside_frames import GOAL, episode_frames, verdicts, write_rows
+from zsrm.envs.rollout import make_env
 from zsrm.envs.scripted import scripted_controller
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.corrected import goal_labeler
 
-GOAL = "a yellow block inside of a box"
 KINDS = ("box", "hover", "wander")
 
 
@@ -42,16 +41,6 @@ def away_from_box(kind: str):
     return make
 
 
-def episode_frames(env, policy, seeds, skip: int = 5, every: int = 1):
-    """The tilted camera's frames (after the first ``skip`` steps) and the oracle's verdicts."""
-    frames, oracle = [], []
-    for seed in seeds:
-        for _, obs, info, _ in list(episode_steps(env, policy, seed=seed))[skip::every]:
-            frames.append(obs["tilted"])
-            oracle.append(bool(info["is_success"]))
-    return np.stack(frames), np.array(oracle)
-
-
 def check(area: float, seeds, kinds, scripted_episodes: int, every: int, folder: str) -> dict:
     cfg = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=10000, zsrm_correct_box_area=area)
     env = make_env(GOAL, cameras=("tilted",), image_size=cfg.image_size)
@@ -61,14 +50,14 @@ def check(area: float, seeds, kinds, scripted_episodes: int, every: int, folder:
     labeler = goal_labeler(cfg, folder)
     out = {}
     for name, (frames, oracle) in runs.items():
+        frames = frames["tilted"]
         labeler.grounder.box_min_area = area
         checked = labeler(frames)
         labeler.grounder.box_min_area = 0.0  # the labeler as zsrm label's
         unchecked = labeler(frames)
         row = {"frames": len(frames), "oracle_goal": int(oracle.sum())}
         for key, said in (("unchecked", unchecked), ("checked", checked)):
-            row[key] = {"says_goal": int(said.sum()), "false_goal": int((said & ~oracle).sum()),
-                        "recall": float(said[oracle].mean()) if oracle.any() else None}
+            row[key] = verdicts(said, oracle)
         out[name] = row
     return out
 
@@ -88,10 +77,7 @@ def main() -> None:
                    "command": f"python probes/box_area_check.py --area {args.area} --seeds "
                               f"{' '.join(map(str, args.seeds))} --kinds {' '.join(args.kinds)} --scripted-episodes "
                               f"{args.scripted_episodes} --every {args.every} --out {args.out}"}
-    write_json(args.out, out)
-    for name, row in out.items():
-        if name != "meta":
-            print(name, row)
+    write_rows(args.out, out)
 
 
 if __name__ == "__main__":

@@ -20,14 +20,12 @@ import argparse
 
 import numpy as np
 
-from zsrm.common.files import write_json
-from zsrm.envs.rollout import episode_steps, make_env
+from inside_frames import GOAL, episode_frames, verdicts, write_rows
+from zsrm.envs.rollout import make_env
 from zsrm.envs.scripted import PickPlaceController, scripted_controller
 from zsrm.grounding.goal_check import front_rise_ok, lift_ok
 from zsrm.rl.config import TrainConfig
 from zsrm.rl.corrected import goal_labeler
-
-GOAL = "a yellow block inside of a box"
 
 
 def held_in_front(dy: float):
@@ -45,33 +43,23 @@ def held_in_front(dy: float):
     return make
 
 
-def episode_frames(env, policy, seeds, skip: int = 5, every: int = 1):
-    """Both cameras' frames (after the first ``skip`` steps) and the oracle's verdicts."""
-    tilted, front, oracle = [], [], []
-    for seed in seeds:
-        for _, obs, info, _ in list(episode_steps(env, policy, seed=seed))[skip::every]:
-            tilted.append(obs["tilted"])
-            front.append(obs["front"])
-            oracle.append(bool(info["is_success"]))
-    return np.stack(tilted), np.stack(front), np.array(oracle)
-
-
 def check(offsets, seeds, scripted_episodes: int, every: int, folder: str) -> dict:
     cfg = TrainConfig(goal="place_inside", reward="zsrm", zsrm_correct_every=10000, zsrm_correct_box_area=0.0115,
                       zsrm_correct_front=True, zsrm_correct_height=True)
     env = make_env(GOAL, cameras=("tilted", "front"), image_size=cfg.image_size)
-    runs = {f"hover{dy:+.2f}": episode_frames(env, held_in_front(dy), seeds, every=every) for dy in offsets}
-    runs["scripted"] = episode_frames(env, scripted_controller, range(scripted_episodes), every=every)
+    cameras = ("tilted", "front")
+    runs = {f"hover{dy:+.2f}": episode_frames(env, held_in_front(dy), seeds, cameras, every=every) for dy in offsets}
+    runs["scripted"] = episode_frames(env, scripted_controller, range(scripted_episodes), cameras, every=every)
     env.close()
     labeler = goal_labeler(cfg, folder)
     out = {}
-    for name, (tilted, front, oracle) in runs.items():
+    for name, (frames, oracle) in runs.items():
+        tilted, front = frames["tilted"], frames["front"]
         unchecked, rise, lift = labeler.read(tilted, front)  # the tilted camera's verdict and the checks' quantities
         row = {"frames": len(tilted), "oracle_goal": int(oracle.sum())}
         for key, said in (("tilted_only", unchecked), ("front_check", unchecked & front_rise_ok(rise)),
                           ("height_check", unchecked & lift_ok(lift))):
-            row[key] = {"says_goal": int(said.sum()), "false_goal": int((said & ~oracle).sum()),
-                        "recall": float(said[oracle].mean()) if oracle.any() else None}
+            row[key] = verdicts(said, oracle)
         for key, where in (("oracle_goal", oracle), ("tilted_false_goal", unchecked & ~oracle)):
             for quantity, values in (("rise", rise), ("lift", lift)):
                 if where.any():
@@ -96,10 +84,7 @@ def main() -> None:
                    "command": f"python probes/inside_front_check.py --offsets {' '.join(map(str, args.offsets))} "
                               f"--seeds {' '.join(map(str, args.seeds))} --scripted-episodes "
                               f"{args.scripted_episodes} --every {args.every} --out {args.out}"}
-    write_json(args.out, out)
-    for name, row in out.items():
-        if name != "meta":
-            print(name, row)
+    write_rows(args.out, out)
 
 
 if __name__ == "__main__":

@@ -52,6 +52,7 @@ def run_benchmark(name: str, monkeypatch, *args: str, folder: str = "benchmarks"
 
     script = Path(__file__).parent.parent / folder / name
     monkeypatch.setattr(sys, "argv", [str(script), *args])
+    monkeypatch.syspath_prepend(str(script.parent))  # as python puts the script's folder first
     runpy.run_path(str(script), run_name="__main__")
 
 
