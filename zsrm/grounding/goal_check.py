@@ -31,8 +31,9 @@ CALIBRATION_IMAGES = 16  # exploration renders the labeler is calibrated on (zsr
 FRONT_RISE = (0.15, 0.85)
 # The height check of "inside of" (``height_check``): the block's centre, triangulated from its
 # Grad-CAM points on the goal's camera and the front camera, at most this many block widths above a
-# resting block's centre. Dropped in the box it reads 0.0-0.2; held in the air in front of the box,
-# which the tilted camera reads as in it, 0.8-1.0 (probes/inside_front_check.py).
+# resting block's centre. Dropped in the box it reads -0.1 to 0.4 (10th to 90th percentile); held 8 cm
+# up in front of the box, which the tilted camera reads as in it, 0.6 to 1.05 (probes/inside_front_check.py).
+# 0.67 (``--zsrm-correct-lift-max``) also counts a block held low in the box, as the oracle does.
 LIFT_MAX = 0.5
 
 

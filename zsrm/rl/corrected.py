@@ -9,9 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from zsrm.common.files import read_json, write_json
+from zsrm.data.shards import load_npz, save_npz
 from zsrm.fullmodel import load_reward_backbone
 from zsrm.grounding.annotate import BOX_VLM, DEFAULT_VLM
 from zsrm.grounding.goal_check import GoalLabeler
@@ -50,8 +49,8 @@ def explored_labels(cfg: TrainConfig, labeler: GoalLabeler, folder: str | Path):
     folder = Path(folder)
     kept = folder / "labelled.npz"
     if kept.is_file():
-        with np.load(kept) as done:
-            return done["frames"], done["holds"]
+        done = load_npz(kept)
+        return done["frames"], done["holds"]
     from zsrm.data.collect import CollectConfig, collect
     from zsrm.tasks.language import COLOURS
 
@@ -65,7 +64,7 @@ def explored_labels(cfg: TrainConfig, labeler: GoalLabeler, folder: str | Path):
         hold &= data["box_present"]
     frames = data[f"images_{camera}"][hold]
     holds = labeler(frames, **({"front": data["images_front"][hold]} if labeler.needs_front else {}))
-    np.savez(kept, frames=frames, holds=holds)
+    save_npz(kept, frames=frames, holds=holds)  # atomically: a killed run labels again, never reads half
     return frames, holds
 
 
