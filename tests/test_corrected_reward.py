@@ -75,13 +75,16 @@ def test_frames_labelled_before_training_let_the_first_update_come_before_the_po
 
 
 def test_the_labeler_labels_exploration_renders_of_the_goals_scene_that_hold_its_objects(tmp_path):
+    from types import SimpleNamespace
+
     from zsrm.rl.corrected import explored_labels
     from zsrm.rl.goals import task_entry
 
     calls = []
 
-    class Labeler:  # the goal labeler's interface: which task, which camera, does it read the front camera
+    class Labeler:  # the goal labeler's interface: task, camera, the cameras of its calibration, the front camera
         task, camera, needs_front = task_entry("place_inside").task, "tilted", True
+        grounder = SimpleNamespace(data=SimpleNamespace(cameras=("tilted", "front")))
 
         def __call__(self, frames, front):
             calls.append(len(frames))

@@ -84,12 +84,16 @@ def table_homography(env, camera: str, size: int, height: float | None = None) -
     base = getattr(env, "unwrapped", env)
     pos, rot, fovy = camera_frame(base, camera)
     z = TABLE_TOP + base.rest_height if height is None else height
+    # (X, Y, 1) -> camera-axis coordinates, then -> pixels
+    to_camera = np.column_stack([rot.T[:, 0], rot.T[:, 1], rot.T @ (np.array([0.0, 0.0, z]) - pos)])
+    return np.linalg.inv(_to_pixels(size, fovy) @ to_camera)
+
+
+def _to_pixels(size: int, fovy: float) -> np.ndarray:
+    """3x3: camera-axis coordinates -> ``(u w, v w, w)``, with w the depth (see :func:`project`)."""
     focal = 0.5 * size / np.tan(np.deg2rad(fovy) / 2)
     c = 0.5 * size - 0.5
-    # (X, Y, 1) -> camera-axis coordinates, then -> (u w, v w, w) with w the depth (see project).
-    to_camera = np.column_stack([rot.T[:, 0], rot.T[:, 1], rot.T @ (np.array([0.0, 0.0, z]) - pos)])
-    to_pixels = np.array([[focal, 0.0, -c], [0.0, -focal, -c], [0.0, 0.0, -1.0]])
-    return np.linalg.inv(to_pixels @ to_camera)
+    return np.array([[focal, 0.0, -c], [0.0, -focal, -c], [0.0, 0.0, -1.0]])
 
 
 def table_homographies(env, size: int, cameras=CAMERAS) -> dict[str, list[list[float]]]:
@@ -109,10 +113,8 @@ def pixel_rays(env, camera: str, size: int) -> dict[str, list]:
     pixel coordinates ``(x, row, 1)`` to the world direction of the ray through that pixel
     (:func:`triangulate` reads two cameras' rays). JSON-ready."""
     pos, rot, fovy = camera_frame(env, camera)
-    focal = 0.5 * size / np.tan(np.deg2rad(fovy) / 2)
-    c = 0.5 * size - 0.5
-    to_axes = np.array([[1.0, 0.0, -c], [0.0, -1.0, c], [0.0, 0.0, -focal]]) / focal  # see project
-    return {"origin": pos.tolist(), "direction": (rot @ to_axes).tolist()}
+    # pixels -> a camera-axis point at depth 1 on the ray, then -> world axes
+    return {"origin": pos.tolist(), "direction": (rot @ np.linalg.inv(_to_pixels(size, fovy))).tolist()}
 
 
 def triangulate(rays_a: dict, xy_a, rays_b: dict, xy_b) -> np.ndarray:

@@ -55,9 +55,9 @@ def explored_labels(cfg: TrainConfig, labeler: GoalLabeler, folder: str | Path):
     from zsrm.tasks.language import COLOURS
 
     task, camera = labeler.task, labeler.camera
-    cameras = (camera, "front") if labeler.needs_front and camera != "front" else (camera,)
     data = collect(CollectConfig(images=cfg.zsrm_correct_explore, shard_size=min(cfg.zsrm_correct_explore, 256),
-                                 scenes=(labeler_scene(cfg),), cameras=cameras, image_size=cfg.image_size,
+                                 scenes=(labeler_scene(cfg),), cameras=labeler.grounder.data.cameras,
+                                 image_size=cfg.image_size,
                                  p_box=0.5 if task.has_container else 0.0), folder, progress=False).load()
     hold = data["present"][:, [COLOURS.index(c) for c in task.objects if c in COLOURS]].all(axis=1)
     if task.has_container:
