@@ -29,6 +29,7 @@ def main(argv=None) -> int:
     parser.add_argument("--data", required=True, help="held-out data of the scene, labelled (zsrm label)")
     parser.add_argument("--students", nargs="+", required=True, metavar="NAME=FOLDER")
     parser.add_argument("--out", required=True)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1, 2, 3], help="ensemble sizes to score")
     args = parser.parse_args(argv)
     from zsrm.common.files import write_json
     from zsrm.envs.adapter import load_adapter
@@ -46,7 +47,7 @@ def main(argv=None) -> int:
         reward = ZSRMReward(load_reward_backbone(folder), objects=objects)
         margins[name] = {g: reward.outputs(f.images, f.goal)["margin"] for g, f in frames.items()}
     rows = []
-    for k in (1, 2, 3):
+    for k in args.sizes:
         for group in itertools.combinations(students, k):
             f1 = {g: round(binary_metrics(np.mean([margins[n][g] for n in group], 0) > 0, f.success)["f1"], 4)
                   for g, f in frames.items()}

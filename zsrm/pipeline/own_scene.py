@@ -32,8 +32,6 @@ command exits 1: the chain is not usable as it stands. The report (``report.md``
 """
 from __future__ import annotations
 
-import os
-import platform
 import shlex
 import sys
 import time
@@ -42,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from zsrm.common import files
+from zsrm.common import files, machine
 from zsrm.rl.config import PresetName
 
 SUMMARY, REPORT, FIGURE = "summary.json", "report.md", "localisation.png"
@@ -332,7 +330,7 @@ class SceneChain:
         result["meta"] = {
             "command": self.command(), "wall_s": round(sum(seconds.values()), 1),
             "stage_seconds": seconds, "bare_xml": bool(adapter.xml and not adapter.env_id),
-            "machine": f"{platform.machine()}, {os.cpu_count()} cores", "out": str(out),
+            "machine": machine.describe(), "out": str(out),
             "numbers": "Float results move across CPUs (docs/own-scene.md); on one machine a rerun is identical"}
         return result
 

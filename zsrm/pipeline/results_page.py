@@ -332,11 +332,14 @@ SIDE = [
      "images and 4000 student steps (the shipped student's recipe; its VLM stage copied from the default run, so "
      "its wall time leaves that stage out): not better than the default on the left-of goal"),
     ("side/scenes/own_scene_a32639f_rerun.json", "the code that wrote results/own_scene.json (a32639f) rerun on "
-     "this machine: the same numbers as own_scene_seed0.json, not the committed file's (another CPU)"),
+     "another CPU (session of 2026-12-07 afternoon): other numbers than the committed file's"),
+    ("side/scenes/own_scene_student_seeds.json", "the first example's reward F1 per student: three student seeds on "
+     "the old settings' labels and three on the one command's, a longer student and swapped text towers "
+     "(docs/own-scene.md)"),
     ("side/scenes/own_scene_student_ensembles.json", "the first example's students alone and their mean margins "
      "in twos and threes (probes/student_ensemble.py)"),
     ("side/scenes/own_scene_seed0.json", "the first example through zsrm own-scene with seed 0 alone and no zoomed "
-     "views: the VLM results/own_scene.json was made with"),
+     "views, the settings results/own_scene.json was made with: its numbers to the digit, on its CPU"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
      "example scene (probes/own_scene_starts.py): why its goals train in compact scenes with 1 cm steps"),
     ("side/rl/push_close_sides.json", "a push_close oracle policy (v3, seed 1) succeeds as often whichever side its "
