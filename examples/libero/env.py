@@ -8,7 +8,9 @@ shipped initial states), written as a user would, outside zsrm. Runs in ``.venv-
 * Rendered without shadows, reflections or skybox: 4.9 -> 11.9 renders/s at 64 px on one
   core (726k mesh vertices and 4096 px textures on a software renderer).
 * Exploration: one of the task's shipped initial states, then zsrm's layout (held objects
-  dropped anywhere on the objects' area, with ``p_stack`` one dropped onto another), settled.
+  dropped anywhere on the objects' area, 10 cm apart, with ``p_stack`` one dropped onto
+  another), settled; drawn again while an object came to rest off the area (thrown onto the
+  cabinet or the floor, where no camera sees it but its presence caption says it is there).
 """
 from __future__ import annotations
 
@@ -19,11 +21,15 @@ import numpy as np
 from examples.robosuite.env import RobosuiteTableEnv, _robosuite
 
 LIBERO_CAMERAS = {
-    "libero_front": 'pos="0.32 0.1 1.0" xyaxes="0 1 0 -0.174 0 0.985" fovy="55"',  # 10 degrees down
+    # 28 degrees down from 26 cm over the table, wide enough for the whole objects' area (at 23
+    # degrees and 50 degrees of view, 10-30% of objects fell outside it; from 10 cm up at 10
+    # degrees, until 2026-12-07, they were slivers on the horizon under the robot).
+    "libero_front": 'pos="0.42 0.11 1.16" xyaxes="0 1 0 -0.469 0 0.883" fovy="60"',
     "libero_left": 'pos="-0.05 -0.3 1.45" xyaxes="1 0 0 0 0.766 0.643" fovy="45"',  # 50 degrees down, over the cabinet
     "libero_tilted": 'pos="0.4 0.1 1.4" xyaxes="0 1 0 -0.707 0 0.707" fovy="45"',  # 45 degrees down
 }
 LIBERO_XY = ((-0.2, 0.12), (-0.08, 0.3))  # where LIBERO-Spatial's objects lie (its initial states)
+MIN_GAP = 0.1  # metres between the centres of objects a layout drops (a bowl is 12 cm across)
 
 
 class LiberoTableEnv(RobosuiteTableEnv):
@@ -60,12 +66,38 @@ class LiberoTableEnv(RobosuiteTableEnv):
         self.rs.sim.set_state_from_flattened(self.init_states[int(rng.integers(len(self.init_states)))])
         self.rs.sim.forward()
         top = self.rs.table_offset[2] + 0.1  # drop height: above every object's origin at rest
-        spots = {o: np.array([rng.uniform(*self.table_xy[0]), rng.uniform(*self.table_xy[1]), top]) for o in self.held}
+        spots: dict = {}
+        for o in self.held:  # apart: objects dropped onto each other were thrown off the table
+            for _ in range(100):
+                xy = np.array([rng.uniform(*self.table_xy[0]), rng.uniform(*self.table_xy[1])])
+                if all(np.linalg.norm(xy - s[:2]) >= MIN_GAP for s in spots.values()):
+                    break
+            spots[o] = np.array([*xy, top])
         if len(self.held) >= 2 and rng.random() < self.p_stack:
             upper, lower = (self.held[i] for i in rng.choice(len(self.held), 2, replace=False))
             spots[upper] = spots[lower] + np.array([*rng.uniform(-0.01, 0.01, 2), 0.07])
         for obj, xyz in spots.items():
             self._place(obj, xyz)
+
+    def reset(self, *, seed=None, options=None):
+        """A layout whose held objects all came to rest on the objects' area (up to 10 draws)."""
+        obs, info = super().reset(seed=seed, options=options)
+        for _ in range(9):
+            if self.task_layout or self.on_area():
+                break
+            obs, info = super().reset(options=options)
+        return obs, info
+
+    def on_area(self, margin: float = 0.05) -> bool:
+        """Whether every held object rests on the objects' area (within ``margin`` metres), not
+        on a fixture or the floor."""
+        (x0, x1), (y0, y1) = self.table_xy
+        z = self.rs.table_offset[2]
+        for o in self.held:
+            x, y, h = self.data.xpos[self.model.body(self.body_name(o)).id]
+            if not (x0 - margin <= x <= x1 + margin and y0 - margin <= y <= y1 + margin and z - 0.02 <= h <= z + 0.1):
+                return False
+        return True
 
     def close(self):
         self.renderer.close()

@@ -333,6 +333,8 @@ SIDE = [
      "its wall time leaves that stage out): not better than the default on the left-of goal"),
     ("side/scenes/own_scene_a32639f_rerun.json", "the code that wrote results/own_scene.json (a32639f) rerun on "
      "another CPU (session of 2026-12-07 afternoon): other numbers than the committed file's"),
+    ("side/scenes/slate_scene_epyc_avx512.json", "the slate scene's one command rerun on the CPU that reproduces "
+     "results/own_scene.json (AMD EPYC family 26, AVX-512): usable there too, another VLM seed kept"),
     ("side/scenes/own_scene_student_seeds.json", "the first example's reward F1 per student: three student seeds on "
      "the old settings' labels and three on the one command's, a longer student and swapped text towers "
      "(docs/own-scene.md)"),
