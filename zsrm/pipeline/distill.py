@@ -8,11 +8,11 @@
 from __future__ import annotations
 
 import os
-import platform
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from zsrm.common.files import check_writable
+from zsrm.common.machine import describe
 from zsrm.pipeline import narrow
 from zsrm.pipeline.learn import Sweep
 from zsrm.policy.training import DistillConfig
@@ -238,4 +238,4 @@ class EvalMultitask:
                 "command": f"zsrm eval-multitask --policies {' '.join(self.policies)} --data {self.data} --seeds {self.seeds}"
                            + (f" --tasks {self.tasks}" if self.tasks else "")
                            + (" --text-span" if self.text_span else "") + f" --out {self.out}",
-                "machine": f"{platform.machine()}, {os.cpu_count()} cores"}
+                "machine": describe()}

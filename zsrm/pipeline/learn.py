@@ -6,14 +6,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import platform
 import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
 from zsrm.common.files import check_writable, write_json
+from zsrm.common.machine import describe
 from zsrm.rl.config import REWARDS, PresetName, TrainConfig, preset_settings
 from zsrm.tasks.catalogue import LEARNING_TASKS
 
@@ -189,7 +188,7 @@ class Sweep:
                            + (f" --scene {self.scene}" if self.scene else "")
                            + (f" --vlm {self.vlm}" if self.vlm != "scene" else "")
                            + (f" --reward-model {self.reward_model}" if self.reward_model != "student" else ""),
-                "machine": f"{platform.machine()}, {os.cpu_count()} cores, no GPU"}
+                "machine": describe() + ", no GPU"}
 
 
 @dataclass

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import html
 import json
-import os
 import platform
 import shutil
 import time
@@ -18,12 +17,13 @@ from pathlib import Path
 import numpy as np
 
 from zsrm.common.files import write_json, write_text
+from zsrm.common.machine import describe
 
 RESULTS = Path("results")
 
 
 def machine() -> str:
-    return f"{platform.platform()}, {platform.machine()}, {os.cpu_count()} CPU cores, no GPU used"
+    return f"{platform.platform()}, {describe()}, no GPU used"
 
 
 class Report:
