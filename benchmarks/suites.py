@@ -115,10 +115,11 @@ class Labeler:
         captions = captions_from_pixels(self.data, self.cfg, pixels, present, np.zeros(len(present), np.int64))
         return np.array([goal in c for c in captions])
 
-    def true_pixels(self, f: dict, objects) -> dict:
-        """:func:`goal_frames`' true pixels in the data's object order."""
+    def holds_true(self, f: dict, objects, goal: str) -> np.ndarray:
+        """:meth:`holds_at` on :func:`goal_frames`' true pixels (its ``objects``' order): the
+        labeler's ceiling on these frames."""
         order = [list(objects).index(o) for o in self.data.colours]
-        return {c: f[f"pixels_{c}"][:, order] for c in self.data.cameras}
+        return self.holds_at({c: f[f"pixels_{c}"][:, order] for c in self.data.cameras}, f["present"][:, order], goal)
 
 
 def _language(scene: str) -> str | None:
@@ -206,9 +207,7 @@ def main(argv=None) -> int:
         by_scene[goal] = [len(p["success"]) for p in parts]
         f = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
         labeler[goal] = binary_metrics(zsrm_labeler.holds(f, goal), f["success"])
-        present = f["present"][:, [list(adapter.objects).index(o) for o in zsrm_labeler.data.colours]]
-        ceiling[goal] = binary_metrics(zsrm_labeler.holds_at(zsrm_labeler.true_pixels(f, adapter.objects), present,
-                                                             goal), f["success"])
+        ceiling[goal] = binary_metrics(zsrm_labeler.holds_true(f, adapter.objects, goal), f["success"])
         frames[goal] = EvalFrames(goal, goal, camera, f[f"images_{camera}"], f["success"], f["source"],
                                   np.arange(len(f["success"])), np.zeros(len(f["success"]), int))
     frames_s = time.perf_counter() - t1

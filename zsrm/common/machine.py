@@ -30,6 +30,6 @@ def cpu_model(cpuinfo: str | Path = "/proc/cpuinfo") -> str:
     return name
 
 
-def describe(cores: bool = True) -> str:
+def describe() -> str:
     """``x86_64, AMD EPYC (family 26, model 2), AVX-512, 2 cores``."""
-    return f"{platform.machine()}, {cpu_model()}" + (f", {os.cpu_count()} cores" if cores else "")
+    return f"{platform.machine()}, {cpu_model()}, {os.cpu_count()} cores"
