@@ -4,8 +4,8 @@ import importlib
 
 import pytest
 
-MODULES = ["zsrm.tasks.catalogue", "zsrm.tasks.language", "zsrm.envs.rollout", "zsrm.fullmodel", "zsrm.evaluation.metrics",
-           "zsrm.evaluation.curves", "zsrm.evaluation.goal_parsing", "zsrm.cli.options", "zsrm.testing.colour_vlm",
+MODULES = ["zsrm.tasks.catalogue", "zsrm.tasks.language", "zsrm.envs.rollout", "zsrm.fullmodel",
+           "zsrm.fullmodel.ensemble", "zsrm.evaluation.metrics", "zsrm.evaluation.curves", "zsrm.evaluation.goal_parsing", "zsrm.cli.options", "zsrm.testing.colour_vlm",
            "zsrm.testing.hostile", "zsrm.testing.synthetic", "zsrm.rewards.vice", "zsrm.rl.sweep",
            "zsrm.rl.auxiliary", "zsrm.rl.augment", "zsrm.envs.state", "zsrm.evaluation.learning_curves", "zsrm.evaluation.pendulum_pose",
            "zsrm.pipeline.learn"]

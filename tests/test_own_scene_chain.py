@@ -307,6 +307,11 @@ def test_the_one_command_runs_the_chain_end_to_end_and_its_gates_speak_up(tmp_pa
     assert summary["meta"]["command"].startswith("zsrm own-scene --scene " + SPEC)
     assert summary["usable"] is False and any(not g["ok"] for g in summary["gates"])
     assert summary["vlm"]["seed"] in (0, 1)
+    assert summary["meta"]["students"] == 3 and summary["meta"]["reward_model"] == "students"  # the default
+    reward_eval = json.loads((out / "reward_eval.json").read_text())
+    assert reward_eval["meta"]["models"]["zsrm"] == str(out / "students")
+    assert list(reward_eval["meta"]["training"]["zsrm"]["members"]) == ["../student", "../student-seed1",
+                                                                         "../student-seed2"]
     report = (out / "report.md").read_text()
     assert "Usable: **no**" in report and "## Localisation" in report and (out / "localisation.png").is_file()
     assert main(args) == 1  # resumed: every stage is done
@@ -379,3 +384,103 @@ def test_the_sideways_benchmark_needs_the_chains_student(tmp_path):
     with pytest.raises(SystemExit, match="has no student: run the chain there first"):
         own_scene.main(["--sideways", "--work", str(tmp_path), "--out", str(tmp_path / "r.json")])
     assert not (tmp_path / "r.json").exists()
+
+
+# --- several students: one reward of their mean score ------------------------------------------
+class _Recorder:
+    """Stands in for a stage's command: records how it was called; a student it trains is a
+    folder with a student's config and training.json."""
+
+    calls: list = []
+
+    def __init__(self, **kwargs):
+        self.kwargs = kwargs
+
+    def run(self):
+        _Recorder.calls.append(self.kwargs)
+        if self.kwargs.get("student"):
+            folder = Path(self.kwargs["out"])
+            folder.mkdir(parents=True)
+            (folder / "config.json").write_text(json.dumps({"backend": "zsrm-student"}))
+            (folder / "training.json").write_text("{}")
+        return 0
+
+
+@pytest.fixture
+def recorded(monkeypatch):
+    import zsrm.pipeline.build as build
+    import zsrm.pipeline.learn as learn
+    import zsrm.pipeline.measure as measure
+
+    for module, name in ((build, "Finetune"), (measure, "EvalReward"), (learn, "Sweep")):
+        monkeypatch.setattr(module, name, _Recorder)
+    monkeypatch.setattr(_Recorder, "calls", [])
+    return _Recorder.calls
+
+
+def _stages(out, students):
+    from zsrm.pipeline.own_scene import SceneChain
+
+    chain = SceneChain(scene=SPEC, goals=tuple(GOALS), out=str(out), students=students, ppo_goal=GOALS[0])
+    out.mkdir(exist_ok=True)
+    (out / "vlm.json").write_text(json.dumps({"chosen": str(out / "vlm-seed0")}))
+    return {name: (run, done) for name, run, done in chain.stages(out)}
+
+
+def test_three_students_train_seeds_0_to_2_and_the_rewards_read_their_ensemble(tmp_path, recorded):
+    out = tmp_path / "chain"
+    stages = _stages(out, 3)
+    run, done = stages["finetune"]
+    assert done == out / "students" / "config.json"
+    (out / "student-seed1").mkdir()  # a killed run finished seed 1: it is kept, not trained again
+    (out / "student-seed1" / "config.json").write_text(json.dumps({"backend": "zsrm-student"}))
+    (out / "student-seed1" / "training.json").write_text("{}")
+    run()
+    assert [(c["seed"], c["out"]) for c in recorded] == [(0, str(out / "student")), (2, str(out / "student-seed2"))]
+    assert all(c["student"] and c["data"] == str(out / "train-data") and c["vlm"] == str(out / "vlm-seed0")
+               for c in recorded)
+    assert json.loads(done.read_text())["members"] == ["../student", "../student-seed1", "../student-seed2"]
+    recorded.clear()
+    stages["eval-reward"][0]()
+    stages["sweep"][0]()
+    assert recorded[0]["zsrm"] == recorded[1]["reward_model"] == str(out / "students")
+
+
+def test_one_student_is_the_chain_as_before(tmp_path, recorded):
+    out = tmp_path / "chain"
+    stages = _stages(out, 1)
+    run, done = stages["finetune"]
+    assert done == out / "student" / "training.json"
+    run()
+    assert [(c["seed"], c["out"]) for c in recorded] == [(0, str(out / "student"))]
+    assert not (out / "students").exists()
+    recorded.clear()
+    stages["eval-reward"][0]()
+    stages["sweep"][0]()
+    assert recorded[0]["zsrm"] == recorded[1]["reward_model"] == str(out / "student")
+
+
+def test_a_folder_from_before_students_is_refused_with_more_and_kept_with_one(tmp_path, capsys):
+    from zsrm.pipeline.own_scene import SceneChain
+
+    out = tmp_path / "chain"
+    SceneChain(scene=SPEC, goals=tuple(GOALS), out=str(out), students=1).check_settings(out)
+    old = {k: v for k, v in json.loads((out / "chain.json").read_text()).items() if k != "students"}
+    (out / "chain.json").write_text(json.dumps(old))  # as written before --students
+    SceneChain(scene=SPEC, goals=tuple(GOALS), out=str(out), students=1).check_settings(out)  # the old chain
+    assert main(["own-scene", "--scene", SPEC, "--goals", *GOALS, "--out", str(out), "--dry-run"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "(students: 1 there, 3 here): give --students 1, another --out" in err
+    assert main(["own-scene", "--scene", SPEC, "--goals", *GOALS, "--out", str(out), "--students", "0"]) == 2
+    assert "--students must be >= 1" in capsys.readouterr().err
+
+
+def test_the_report_says_which_reward_model_it_read(tmp_path):
+    from zsrm.pipeline.own_scene import write_report
+
+    meta = {"command": "zsrm own-scene", "wall_s": 1.0, "machine": "m", "numbers": "n"}
+    summary = {"scene": "s", "usable": True, "gates": [], "meta": {**meta, "students": 3}}
+    assert "Reward model: the mean image-text score of 3 students, seeds 0-2 (`students/`)." in \
+        write_report(tmp_path, summary).read_text()
+    summary["meta"] = meta  # a summary from before --students
+    assert "Reward model: one student, seed 0 (`student/`)." in write_report(tmp_path, summary).read_text()

@@ -367,6 +367,7 @@ class EvalReward:
                 m.pop("f1_scripted", None)
         results["meta"] = {
             "command": "zsrm " + " ".join(sys.argv[1:]), "scene": self.scene, "data": self.data, "models": names,
+            "training": {"zsrm": _training_summary(self.zsrm)},
             "frames": {t: {"n": len(f), "positives": int(f.success.sum()), "camera": f.camera}
                        for t, f in frames.items()},
             "label": "the scene's oracle: the goal's sentence among the image's true-coordinate captions (zsrm label's "
@@ -449,7 +450,13 @@ class EvalReward:
 
 
 def _training_summary(folder: str) -> dict | None:
-    """What ``zsrm finetune`` recorded about a model: its settings and held-out accuracy."""
+    """What ``zsrm finetune`` recorded about a model: its settings and held-out accuracy (of each
+    member, for an ensemble)."""
+    from zsrm.common.registry import folder_kind, read_config
+    from zsrm.fullmodel.ensemble import KIND
+
+    if folder_kind(folder) == KIND:
+        return {"members": {m: _training_summary(str(Path(folder) / m)) for m in read_config(folder)["members"]}}
     path = Path(folder) / "training.json"
     if not path.is_file():
         return None

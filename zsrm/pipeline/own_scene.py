@@ -17,7 +17,9 @@ loses no finished stage), each with one progress line:
    evaluation only);
 4. ``eval-grounding``: the labeler against the scene's oracle per relation, and each object's
    localisation error against the true pixels per camera (evaluation only);
-5. ``finetune --student``: the reward model, on stage 2's Grad-CAM captions;
+5. ``finetune --student``: the reward model, on stage 2's Grad-CAM captions: ``--students`` of them,
+   seeds 0..N-1 (``student/``, ``student-seed1/``, ...), one reward of their mean image-text score
+   (the ensemble ``students/``; with ``--students 1`` the one ``student/``);
 6. ``eval-reward --scene``: the binarised reward's F1 against the oracle per goal, base beside;
 7. ``sweep --scene`` (with ``--ppo-goal``): PPO with the oracle, zsrm and random rewards.
 
@@ -80,6 +82,7 @@ class SceneChain:
     images: int = 4000  # exploration images the reward model trains on
     eval_images: int = 1000  # held-out exploration images (evaluation)
     finetune_steps: int = 3000  # the student's steps
+    students: int = 3  # students trained, seeds 0..N-1; the reward is their mean image-text score (students/); 1: one student (student/), as before 2026-12-07
     ppo_goal: str | None = None  # also train PPO on this goal, with the oracle, zsrm and random rewards
     ppo_seeds: tuple[int, ...] = (0, 1, 2)  # PPO seeds
     ppo_steps: int = 300_000  # env steps per PPO run
@@ -107,6 +110,9 @@ class SceneChain:
         self.vlm_seeds, self.ppo_seeds = tuple(map(int, self.vlm_seeds)), tuple(map(int, self.ppo_seeds))
         if not self.vlm_seeds:
             raise ValueError("give at least one --vlm-seeds")
+        self.students = int(self.students)
+        if self.students < 1:
+            raise ValueError(f"--students must be >= 1 (1: one student, as before), got {self.students}")
         out = files.check_writable(self.out, folder=True)
         if self.results:
             files.check_writable(self.results)
@@ -181,7 +187,9 @@ class SceneChain:
         return shlex.join(words)
 
     SETTINGS = ("scene", "vlm_seeds", "pretrain_scenes", "pretrain_steps", "arch", "zoom", "images", "eval_images",
-                "finetune_steps")
+                "finetune_steps", "students")
+    # a chain.json written before a setting existed: the value the chain ran with then
+    LEGACY = {"students": 1}
 
     def check_settings(self, out: Path) -> None:
         """A folder's stages were made with one set of settings: a rerun with others is refused
@@ -189,17 +197,18 @@ class SceneChain:
         mine = {k: list(v) if isinstance(v, tuple) else v for k, v in ((k, getattr(self, k)) for k in self.SETTINGS)}
         path = out / "chain.json"
         if path.is_file():
-            have = files.read_json(path, "the chain's settings")
+            have = {**self.LEGACY, **files.read_json(path, "the chain's settings")}
             diff = [f"{k}: {have.get(k)!r} there, {mine[k]!r} here" for k in mine if have.get(k) != mine[k]]
             if diff:
-                raise ValueError(f"{out} holds a chain run with other settings ({'; '.join(diff)}): give another "
-                                 "--out, or delete it")
+                keep = f"--students {have['students']}, " if have.get("students") != mine["students"] else ""
+                raise ValueError(f"{out} holds a chain run with other settings ({'; '.join(diff)}): give {keep}"
+                                 "another --out, or delete it")
         elif not self.dry_run:
             files.write_json(path, mine, indent=1)
 
     def stages(self, out: Path) -> list[tuple[str, callable, Path]]:
         """(name, run, the file it leaves when finished)."""
-        from zsrm.pipeline.build import Collect, Finetune, Label, PretrainVlm, RewardData
+        from zsrm.pipeline.build import Collect, Label, RewardData
         from zsrm.pipeline.learn import Sweep
         from zsrm.pipeline.measure import EvalGrounding, EvalReward
 
@@ -207,7 +216,7 @@ class SceneChain:
         stages = []
         stages.append(("vlm", lambda: self.pretrain_vlms(out), out / "vlm.json"))
         vlm = lambda: str(self.chosen_vlm(out))  # noqa: E731  (known once the vlm stage has run)
-        train, held_out = out / "train-data", out / "eval-data"
+        train, held_out, reward = out / "train-data", out / "eval-data", self.reward_model(out)
         stages += [
             ("reward-data", lambda: RewardData(scene=scene, vlm=vlm(), out=str(train), images=self.images,
                                                shard_size=250, quiet=q).run(), train / "labels" / "manifest.json"),
@@ -217,17 +226,16 @@ class SceneChain:
              held_out / "labels" / "manifest.json"),
             ("eval-grounding", lambda: EvalGrounding(data=str(held_out), out=str(out / "grounding.json")).run(),
              out / "grounding.json"),
-            ("finetune", lambda: Finetune(data=str(train), student=True, vlm=vlm(), out=str(out / "student"),
-                                          steps=self.finetune_steps, threads=self.threads, quiet=q).run(),
-             out / "student" / "training.json"),
-            ("eval-reward", lambda: EvalReward(scene=scene, data=str(held_out), zsrm=str(out / "student"), base=vlm(),
+            ("finetune", lambda: self.train_students(out, train, vlm()),
+             reward / ("config.json" if self.students > 1 else "training.json")),
+            ("eval-reward", lambda: EvalReward(scene=scene, data=str(held_out), zsrm=str(reward), base=vlm(),
                                                tasks=tuple(self.goals), out=str(out / "reward_eval.json"), curves="",
                                                quiet=q).run(), out / "reward_eval.json"),
         ]
         if self.ppo_goal:
             stages.append(("sweep", lambda: Sweep(scene=scene, tasks=(self.ppo_goal,), rewards=("oracle", "zsrm", "random"),
                                                   seeds=tuple(self.ppo_seeds), steps=self.ppo_steps, vlm=vlm(),
-                                                  reward_model=str(out / "student"), root=str(out / "rl"),
+                                                  reward_model=str(reward), root=str(out / "rl"),
                                                   num_cpus=self.num_cpus, config=self.ppo_config,
                                                   out=str(out / "learning.json")).run(),
                            out / "learning.json"))
@@ -274,6 +282,37 @@ class SceneChain:
     def chosen_vlm(out: Path) -> Path:
         """The VLM the ``vlm`` stage kept in the chain folder ``out``."""
         return Path(files.read_json(out / "vlm.json", "the kept VLM")["chosen"])
+
+    # --- the reward model: one student per seed, their mean score ------------------------------
+    def reward_model(self, out: Path) -> Path:
+        """The folder the rewards score with: the ensemble ``students/``, or with one student ``student/``."""
+        return out / ("students" if self.students > 1 else "student")
+
+    def student_folders(self, out: Path) -> list[Path]:
+        """One student per seed 0..N-1: seed 0 in ``student/`` (as before ``--students``), seed S in
+        ``student-seedS/``."""
+        return [out / ("student" if seed == 0 else f"student-seed{seed}") for seed in range(self.students)]
+
+    def train_students(self, out: Path, data: Path, vlm: str) -> None:
+        """``finetune --student --seed S`` for each seed not done yet (a student is done once its
+        ``training.json`` is there: a killed run keeps the finished ones, and the one it was on
+        resumes from its checkpoint), then, with more than one, the ensemble ``students/``."""
+        from zsrm.fullmodel.ensemble import write_ensemble
+        from zsrm.pipeline.build import Finetune
+
+        folders = self.student_folders(out)
+        for seed, folder in enumerate(folders):
+            if (folder / "training.json").is_file():
+                continue
+            if len(folders) > 1:
+                print(f"  finetune --student --seed {seed} ({seed + 1} of {len(folders)}) ...", flush=True)
+            Finetune(data=str(data), student=True, vlm=vlm, out=str(folder), steps=self.finetune_steps, seed=seed,
+                     threads=self.threads, quiet=self.quiet).run()
+        if len(folders) > 1:
+            write_ensemble(self.reward_model(out), folders, meta={
+                "rule": "the mean of the members' image-text cosines (each member's unit embeddings side by side, "
+                        "scaled by 1/sqrt(N)); the binarised reward's argmax is taken on the mean",
+                "seeds": list(range(len(folders)))})
 
     # --- gates -----------------------------------------------------------------------------
     def read_on(self) -> dict[str, set[str]]:
@@ -330,6 +369,7 @@ class SceneChain:
         result["meta"] = {
             "command": self.command(), "wall_s": round(sum(seconds.values()), 1),
             "stage_seconds": seconds, "bare_xml": bool(adapter.xml and not adapter.env_id),
+            "students": self.students, "reward_model": self.reward_model(out).name,
             "machine": machine.describe(), "out": str(out),
             "numbers": "Float results move across CPUs (docs/own-scene.md); on one machine a rerun is identical"}
         return result
@@ -541,6 +581,9 @@ def write_report(out: Path, summary: dict) -> Path:
         lines += ["", f"## PPO on {p['goal']!r} (final oracle episode reward, mean +- s.e. over seeds)", ""]
         lines += [f"* {r}: {p[r]['mean']:.1f} +- {p[r]['se']:.1f}" for r in ("oracle", "zsrm", "random") if r in p]
     meta = summary["meta"]
+    n = meta.get("students", 1)  # a summary written before --students: one student
+    lines += ["", "Reward model: " + (f"the mean image-text score of {n} students, seeds 0-{n - 1} (`students/`)"
+                                      if n > 1 else "one student, seed 0 (`student/`)") + "."]
     lines += ["", f"Command: `{meta['command']}`; {meta['wall_s']:.0f} s of stages on {meta['machine']}. "
               f"{meta['numbers']}.", ""]
     path = out / REPORT
