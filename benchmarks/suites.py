@@ -10,7 +10,7 @@ Runs in the benchmarks' environment (``make bench-setup``: ``.venv-bench``, MuJo
    half with the objects placed as the goal's region says (``place_goal``), half from zsrm's
    exploration layouts, each followed by a few random actions; seeds none of the training saw.
    Evaluation data only.
-3. zsrm's binarised reward (the student) and the base reward (the kept stand-in VLM, binarised
+3. zsrm's binarised reward (the chain's students) and the base reward (the kept stand-in VLM, binarised
    by the same argmax rule) on those frames: F1 and AUROC against the predicate.
 4. What each stage cost, and what a PPO run there would cost.
 """
@@ -193,7 +193,9 @@ def main(argv=None) -> int:
     adapter = load_adapter(suite["scene"])
     module = importlib.import_module(suite["scene"].split(":")[0])
     base_vlm = load_reward_backbone(files.read_json(chain / "vlm.json", "vlm.json")["chosen"])
-    models = {"zsrm": ZSRMReward(load_reward_backbone(str(chain / "student")), name="zsrm", objects=adapter.objects),
+    # the chain's reward model: its students' ensemble (zsrm own-scene --students), else its one student
+    students = chain / "students" if (chain / "students" / "config.json").is_file() else chain / "student"
+    models = {"zsrm": ZSRMReward(load_reward_backbone(str(students)), name="zsrm", objects=adapter.objects),
               "base": ZSRMReward(base_vlm, name="base_binary", objects=adapter.objects)}
 
     t1 = time.perf_counter()
@@ -245,7 +247,7 @@ def main(argv=None) -> int:
         "cost": {"chain_stage_seconds": summary["meta"]["stage_seconds"], "predicate_frames_s": round(frames_s, 1),
                  **speeds(adapter)},
         "meta": {"command": f".venv-bench/bin/python benchmarks/suites.py {' '.join(argv if argv is not None else sys.argv[1:])}",
-                 "chain_command": summary["meta"]["command"], "chain_exit": rc,
+                 "chain_command": summary["meta"]["command"], "chain_exit": rc, "reward_model": students.name,
                  "frames": f"{args.frames} per goal, seeds from {EVAL_SEED}: half placed as the goal says "
                            "(place_goal), half zsrm's exploration layouts; 0-5 random actions after; "
                            "truth: the benchmark's own check",

@@ -89,3 +89,51 @@ def test_table_cameras_are_read_in_metres():
     far = {"tilted": {"red": (20, 30), "yellow": (20, 42)}}  # 12 cm apart
     assert labeler(near) == ["a red block close to a yellow block", "a yellow block close to a red block"]
     assert labeler(far) == []
+
+
+# --- on top of in 3-D (an own scene with calibrated cameras) -----------------------------------
+SOLID = WORLD_THRESHOLDS  # metres: eps_x 3 cm over the footprint, at most 9 cm higher
+
+
+def test_solid_on_top_of_reads_a_thin_stack_table_1_misses():
+    """A bowl resting on a plate sits 8 mm over the plate's origin, under Table 1's 1 cm gap; in
+    3-D it is over the plate's footprint and higher, and the reverse does not hold."""
+    plate, bowl = np.array([0.0, 0.1, 0.8]), np.array([0.01, 0.105, 0.808])
+    beside, held = np.array([0.12, 0.1, 0.8]), np.array([0.0, 0.1, 0.95])
+    solid, below = RELATIONS["on_top_of"].solid, RELATIONS["below"].solid
+    assert solid(bowl, plate, SOLID) and below(plate, bowl, SOLID)
+    assert not solid(plate, bowl, SOLID) and not solid(beside, plate, SOLID) and not solid(held, plate, SOLID)
+    positions, present = np.stack([bowl, plate])[None], np.ones((1, 2), bool)
+    flat = world_table(positions, present, ("red", "yellow"), relations=("on_top_of",))
+    deep = world_table(positions, present, ("red", "yellow"), relations=("on_top_of",), solid=True)
+    assert flat.captions() == [[]]
+    assert deep.captions() == [["a red block on top of a yellow block"]]
+
+
+def test_labeler_triangulates_on_top_of_from_the_tilted_and_left_cameras():
+    """Pixels of two points as a real scene's tilted and left cameras see them: the labeler with
+    their rays reads the thin stack; without rays, Table 1 on the front camera does not."""
+    import gymnasium as gym
+
+    import zsrm.envs  # noqa: F401
+    from zsrm.envs.cameras import pixel_rays, project
+
+    env = gym.make("zsrm/Tabletop-v0", task="stack", cameras=("front",))
+    env.reset(seed=0)
+    base = env.unwrapped
+    lower, upper = np.array([0.0, 0.0, 0.43]), np.array([0.005, 0.0, 0.438])
+    cams = ("front", "left", "tilted")
+    coords = {c: {"yellow": tuple(project(base, c, upper, 64)), "red": tuple(project(base, c, lower, 64))}
+              for c in cams}
+    rays = {c: pixel_rays(base, c, 64) for c in cams}
+    env.close()
+    widths = {"front": 6.0, "left": 6.0, "tilted": 6.0}
+    flat = SpatialLabeler.from_block_widths(widths, colours=("red", "yellow"), relations=("on_top_of",))
+    deep = SpatialLabeler(pixel_thresholds(widths), colours=("red", "yellow"), relations=("on_top_of",),
+                          rays=rays, solid_thresholds=SOLID)
+    assert flat(coords) == []
+    assert deep(coords) == ["a yellow block on top of a red block"]
+    points = deep.points({c: np.array([[coords[c]["red"], coords[c]["yellow"]]]) for c in cams})
+    np.testing.assert_allclose(points[0], [lower, upper], atol=1e-6)
+    with pytest.raises(ValueError, match="rays of the tilted and left"):
+        SpatialLabeler(pixel_thresholds(widths), rays={"front": rays["front"]}, solid_thresholds=SOLID)

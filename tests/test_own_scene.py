@@ -752,6 +752,7 @@ def test_label_an_own_scene_captions_its_phrases_and_its_oracle_is_the_scene_tas
 
     data = collect(_tiny(), tmp_path / "own", progress=False)
     assert list(data.table_homography[SPEC]) == ["tilted"]  # the adapter gives its table_height
+    assert set(data.pixel_rays[SPEC]) == set(OwnScene.cameras)  # so the labeler reads on top of in 3-D
     vlm = _own_vlm(tmp_path / "vlm")
     assert main(["label", str(tmp_path / "own"), "--vlm", str(vlm), "--quiet"]) == 0
     captions, world = data.captions(), data.captions(oracle="world")
@@ -766,9 +767,10 @@ def test_label_an_own_scene_captions_its_phrases_and_its_oracle_is_the_scene_tas
     arrays = data.load(["positions", "present"])
     env = load_adapter(SPEC).make_env(tuple(OwnScene.cameras.values()), 64)
     env.reset(seed=0)
-    for text in ("a red cylinder on the right of a purple cylinder", "a red cylinder close to an orange cylinder"):
+    for text in ("a red cylinder on the right of a purple cylinder", "a red cylinder close to an orange cylinder",
+                 "a red cylinder on top of an orange cylinder"):
         goal = parse_scene_goal(text, PHRASES)
-        role = {"right_of": "front", "close_to": "tilted"}[goal.relation]
+        role = {"right_of": "front", "close_to": "tilted", "on_top_of": "front"}[goal.relation]
         axes = role_axes(env.unwrapped.model, env.unwrapped.data, OwnScene.cameras[role], role)
         idx = [PHRASES.index(p) for p in goal.objects]
         for i in range(6):

@@ -330,20 +330,22 @@ def _own_manifest(cfg: CollectConfig) -> dict:
     role (the labeler's pixel scale). Where the adapter gives its ``table_height``, the width is
     measured where the tilted camera looks at the plane of an object's centre (the table plus
     half an object width), and the tilted camera's table calibration
-    (:func:`zsrm.envs.cameras.table_homography`, from the camera's pose) maps onto that plane:
+    (:func:`zsrm.envs.cameras.table_homography`, from the camera's pose) maps onto that plane,
+    and each role's pixel rays (:func:`~zsrm.envs.cameras.pixel_rays`) let the labeler triangulate:
     geometry only. Without it there is no calibration, and the width is measured at the
     objects' mean position after the first reset (the privileged accessor, read once here)."""
-    from zsrm.envs.cameras import object_width_px, table_homography
+    from zsrm.envs.cameras import object_width_px, pixel_rays, table_homography
 
     adapter, envs = cfg.adapter, _Envs(cfg)
     try:
         env = envs.get(cfg.scene, cfg.objects)
         env.reset(seed=cfg.seed)
-        table, centre = {}, None
+        table, centre, rays = {}, None, {}
         if adapter.table_height is not None:
             height = adapter.table_height + adapter.object_width / 2
             table = {role: table_homography(env, adapter.roles[role], cfg.image_size, height).tolist()
                      for role in cfg.cameras if role in TABLE_PLANE_CAMERAS}
+            rays = {role: pixel_rays(env, adapter.roles[role], cfg.image_size) for role in cfg.cameras}
             centre = _looked_at(env, adapter.roles["tilted"], height)
         if centre is None:
             centre = np.mean(list(adapter.object_positions(env).values()), axis=0)
@@ -352,6 +354,7 @@ def _own_manifest(cfg: CollectConfig) -> dict:
     finally:
         envs.close()
     return {"colours": list(cfg.objects), "block_width_px": {cfg.scene: widths}, "table_homography": {cfg.scene: table},
+            **({"pixel_rays": {cfg.scene: rays}} if rays else {}),
             "scene_adapter": {"name": adapter.name, "env_id": adapter.env_id, "cameras": adapter.roles,
                               "object_width": adapter.object_width, "table_height": adapter.table_height}}
 

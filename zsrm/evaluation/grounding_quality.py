@@ -26,7 +26,7 @@ from zsrm.data.shards import load_npz, read_manifest
 from zsrm.envs.cameras import apply_homography
 from zsrm.evaluation.metrics import auroc
 from zsrm.evaluation.plots import pyplot, save_figure
-from zsrm.grounding.annotate import Grounder, LabelConfig, gradcam_objects, labelers, world_thresholds
+from zsrm.grounding.annotate import Grounder, LabelConfig, gradcam_objects, labelers, reads_solid, world_thresholds
 from zsrm.grounding.gradcam import grid_centres, locate
 from zsrm.grounding.labeler import RelationTable, relation_tuples, world_table
 from zsrm.tasks.catalogue import SCENE_SHAPES
@@ -98,7 +98,8 @@ def _tables(data, cfg, pixels: dict, present, scene_index, world: bool = False, 
         if not len(rows):
             continue
         if world:
-            table = world_table(positions[rows], present[rows], data.objects, world_thresholds(data, cfg), axes=axes)
+            table = world_table(positions[rows], present[rows], data.objects, world_thresholds(data, cfg), axes=axes,
+                                solid=reads_solid(data, cfg))
         else:
             table = labeler.table({c: xy[rows] for c, xy in pixels.items()}, present[rows])
         for r in RELATIONS:

@@ -66,6 +66,7 @@ class LabelConfig:
     refine: Literal["none", "silhouette"] = "silhouette"  # on the table-plane (tilted) camera, move each Grad-CAM point to its object's silhouette centre (zsrm.grounding.silhouette), or keep it
     box_vlm: str | None = None  # the VLM whose Grad-CAM finds the box, in data collected with it (a box-aware VLM); default: scene-box with the scene VLM (shipped: pretrained on box scenes), else --vlm itself
     thresholds: dict = field(default_factory=lambda: asdict(WORLD_THRESHOLDS), metadata={"cli": False})  # Table 1's, in metres
+    on_top: Literal["solid", "front"] = "solid"  # an own scene with calibrated cameras (collected from 2026-12-08): on top of / below read in 3-D, on points triangulated from the tilted and left cameras (the oracle on true positions), or on the front camera as Table 1 (as before)
 
     def world_thresholds(self) -> Thresholds:
         return Thresholds(**self.thresholds)
@@ -245,9 +246,16 @@ def labelers(data: ExplorationData, cfg: LabelConfig, relations=tuple(RELATIONS)
     for scene in data.scenes:
         table, shape = data.table_homography.get(scene, {}), caption_shape(scene)
         thresholds = pixel_thresholds(data.block_width_px[scene], shape, world, table, object_width=own_width)
+        rays = data.pixel_rays.get(scene) if reads_solid(data, cfg) else None
         out[scene] = SpatialLabeler(thresholds, shape=shape, colours=data.objects, relations=relations,
-                                    table_homography=table)
+                                    table_homography=table, rays=rays, solid_thresholds=world if rays else None)
     return out
+
+
+def reads_solid(data: ExplorationData, cfg: LabelConfig) -> bool:
+    """Do the labeler and the oracle read on top of / below in 3-D on this data (``cfg.on_top``
+    "solid", an own scene whose collection recorded its cameras' rays)?"""
+    return cfg.on_top == "solid" and bool(data.scene_adapter) and bool(data.pixel_rays)
 
 
 def captions_from_pixels(data: ExplorationData, cfg: LabelConfig, pixels: dict, present: np.ndarray,
@@ -272,7 +280,8 @@ def world_captions(data: ExplorationData, cfg: LabelConfig, positions, present, 
     for s, scene in enumerate(data.scenes):
         rows = np.nonzero(scene_index == s)[0]
         if len(rows):
-            table = world_table(positions[rows], present[rows], data.objects, world_thresholds(data, cfg), axes=axes)
+            table = world_table(positions[rows], present[rows], data.objects, world_thresholds(data, cfg), axes=axes,
+                                solid=reads_solid(data, cfg))
             for r, cap in zip(rows, table.captions(caption_shape(scene))):
                 out[r] = cap
     return out

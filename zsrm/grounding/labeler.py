@@ -26,7 +26,7 @@ import numpy as np
 
 from zsrm.tasks.language import COLOURS, Task
 from zsrm.tasks.lexicon import CONTAINERS
-from zsrm.tasks.relations import CAMERAS, RELATIONS, WORLD_THRESHOLDS, Thresholds, camera_plane
+from zsrm.tasks.relations import CAMERAS, RELATIONS, SOLID_CAMERAS, WORLD_THRESHOLDS, Thresholds, camera_plane
 from zsrm.tasks.scene_goals import SceneGoal
 
 # Object widths (metres) of the scenes' shapes: the world thresholds are in metres.
@@ -140,7 +140,8 @@ class RelationTable:
 
 
 def relation_table(planes: Mapping[str, np.ndarray], present: np.ndarray, thresholds: Mapping[str, Thresholds],
-                   colours: Sequence[str] = COLOURS, relations: Sequence[str] = tuple(RELATIONS)) -> RelationTable:
+                   colours: Sequence[str] = COLOURS, relations: Sequence[str] = tuple(RELATIONS),
+                   solid: np.ndarray | None = None, solid_thresholds: Thresholds | None = None) -> RelationTable:
     """Evaluate Table 1 on N images of K objects.
 
     planes:     camera -> (N, K, 2) coordinates in that camera's plane (y up); NaN for an object
@@ -148,6 +149,8 @@ def relation_table(planes: Mapping[str, np.ndarray], present: np.ndarray, thresh
     present:    (N, K) bool, the objects in each image.
     thresholds: camera -> the :class:`Thresholds` in that camera's units.
     colours:    the K objects: colours, and the box (see :func:`relation_tuples`).
+    solid:      (N, K, 3) world points (z up, metres): the relations with a 3-D reading
+                (:attr:`~zsrm.tasks.relations.Relation.solid`) read them, with ``solid_thresholds``.
     """
     present = np.asarray(present, dtype=bool)
     if present.ndim != 2 or present.shape[1] != len(colours):
@@ -157,21 +160,34 @@ def relation_table(planes: Mapping[str, np.ndarray], present: np.ndarray, thresh
         if name not in RELATIONS:
             raise ValueError(f"unknown relation {name!r}; known relations: {', '.join(RELATIONS)}")
         rel = RELATIONS[name]
-        if rel.camera not in planes:
-            raise ValueError(f"{name} needs the {rel.camera!r} camera's coordinates")
-        if rel.camera not in thresholds:
-            raise ValueError(f"{name} needs thresholds for the {rel.camera!r} camera")
-        xy = np.asarray(planes[rel.camera], dtype=np.float64)
-        if xy.shape != present.shape + (2,):
-            raise ValueError(f"{rel.camera} coordinates must have shape {present.shape + (2,)}, got {xy.shape}")
+        in_3d = solid is not None and rel.solid is not None
+        xy = _coordinates(name, planes, thresholds, present, solid if in_3d else None)
         t = relation_tuples(name, colours)
-        args = [xy[:, t[:, i]] for i in range(rel.arity)]  # each (N, T, 2)
+        args = [xy[:, t[:, i]] for i in range(rel.arity)]  # each (N, T, 2) or (N, T, 3)
         with np.errstate(invalid="ignore"):  # NaN coordinates compare False: no relation
-            ok = rel(*args, thresholds=thresholds[rel.camera])
+            ok = (rel.solid(*args, solid_thresholds) if in_3d else rel(*args, thresholds=thresholds[rel.camera]))
         ok &= present[:, t].all(axis=-1)
         ok &= np.all([np.isfinite(a).all(-1) for a in args], axis=0)
         tuples[name], holds[name] = t, ok
     return RelationTable(tuple(colours), tuples, holds)
+
+
+def _coordinates(name: str, planes, thresholds, present: np.ndarray, solid: np.ndarray | None) -> np.ndarray:
+    """The coordinates ``name`` reads, checked: its camera's plane, or the 3-D points ``solid``."""
+    if solid is not None:
+        xyz = np.asarray(solid, dtype=np.float64)
+        if xyz.shape != present.shape + (3,):
+            raise ValueError(f"3-D points must have shape {present.shape + (3,)}, got {xyz.shape}")
+        return xyz
+    camera = RELATIONS[name].camera
+    if camera not in planes:
+        raise ValueError(f"{name} needs the {camera!r} camera's coordinates")
+    if camera not in thresholds:
+        raise ValueError(f"{name} needs thresholds for the {camera!r} camera")
+    xy = np.asarray(planes[camera], dtype=np.float64)
+    if xy.shape != present.shape + (2,):
+        raise ValueError(f"{camera} coordinates must have shape {present.shape + (2,)}, got {xy.shape}")
+    return xy
 
 
 class SpatialLabeler:
@@ -187,15 +203,20 @@ class SpatialLabeler:
 
     def __init__(self, thresholds: Mapping[str, Thresholds], shape: str | None = "block",
                  colours: Sequence[str] = COLOURS, relations: Sequence[str] = tuple(RELATIONS),
-                 table_homography: Mapping[str, np.ndarray] | None = None):
+                 table_homography: Mapping[str, np.ndarray] | None = None, rays: Mapping[str, dict] | None = None,
+                 solid_thresholds: Thresholds | None = None):
         missing = {RELATIONS[r].camera for r in relations} - set(thresholds)
         if missing:
             raise ValueError(f"no thresholds for camera(s) {', '.join(sorted(missing))}")
+        if rays is not None and (solid_thresholds is None or set(SOLID_CAMERAS) - set(rays)):
+            raise ValueError(f"a 3-D reading needs the rays of the {' and '.join(SOLID_CAMERAS)} cameras and "
+                             "thresholds in metres")
         self.thresholds = dict(thresholds)
         self.table_homography = {c: np.asarray(h, np.float64) for c, h in (table_homography or {}).items()}
         self.shape = shape
         self.colours = tuple(colours)
         self.relations = tuple(relations)
+        self.rays, self.solid_thresholds = rays, solid_thresholds
 
     @classmethod
     def from_block_widths(cls, block_width_px: Mapping[str, float], shape: str = "block", **kwargs):
@@ -203,7 +224,18 @@ class SpatialLabeler:
 
     def table(self, pixels: Mapping[str, np.ndarray], present: np.ndarray) -> RelationTable:
         """pixels: camera -> (N, K, 2) pixel coordinates (x, row); present: (N, K) bool."""
-        return relation_table(pixel_planes(pixels, self.table_homography), present, self.thresholds, self.colours, self.relations)
+        return relation_table(pixel_planes(pixels, self.table_homography), present, self.thresholds, self.colours,
+                              self.relations, self.points(pixels), self.solid_thresholds)
+
+    def points(self, pixels: Mapping[str, np.ndarray]) -> np.ndarray | None:
+        """(N, K, 3): each object's world point, triangulated from its pixels on :data:`SOLID_CAMERAS`
+        (None without rays: no 3-D reading)."""
+        if self.rays is None or any(c not in pixels for c in SOLID_CAMERAS):
+            return None
+        from zsrm.envs.cameras import triangulate  # mujoco, imported when used
+
+        (a, b) = SOLID_CAMERAS
+        return triangulate(self.rays[a], pixels[a], self.rays[b], pixels[b])
 
     def captions(self, pixels: Mapping[str, np.ndarray], present: np.ndarray) -> list[list[str]]:
         """Every caption that holds, for each of N images."""
@@ -229,8 +261,11 @@ class SpatialLabeler:
 
 def world_table(positions: np.ndarray, present: np.ndarray, colours: Sequence[str] = COLOURS,
                 thresholds: Thresholds = WORLD_THRESHOLDS, relations: Sequence[str] = tuple(RELATIONS),
-                axes: Mapping[str, np.ndarray] | None = None) -> RelationTable:
+                axes: Mapping[str, np.ndarray] | None = None, solid: bool = False) -> RelationTable:
     """The oracle's table from true world positions (N, K, 3), in metres (read along ``axes``
-    where given, see :func:`world_planes`)."""
-    planes = world_planes(np.asarray(positions, dtype=np.float64), axes=axes)
-    return relation_table(planes, present, {c: thresholds for c in CAMERAS}, colours, relations)
+    where given, see :func:`world_planes`; ``solid``: the relations with a 3-D reading read the
+    positions themselves)."""
+    positions = np.asarray(positions, dtype=np.float64)
+    planes = world_planes(positions, axes=axes)
+    return relation_table(planes, present, {c: thresholds for c in CAMERAS}, colours, relations,
+                          positions if solid else None, thresholds)
