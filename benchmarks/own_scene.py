@@ -42,8 +42,11 @@ def sideways(work: Path, out: Path, steps: int, num_cpus: int) -> int:
     from zsrm.pipeline.own_scene import SceneChain, ppo_cells
 
     # the sweep's summary and trial files beside the results (results/own_scene/sideways/)
-    student, learning = work / "student", out.with_suffix("") / "sideways" / "learning.json"
-    if not (student / "training.json").is_file():
+    # the chain's reward model: its students' ensemble (--students, default 3), else its one student
+    ensemble = work / "students" / "config.json"
+    student = work / "students" if ensemble.is_file() else work / "student"
+    learning = out.with_suffix("") / "sideways" / "learning.json"
+    if not (ensemble.is_file() or (student / "training.json").is_file()):
         raise SystemExit(f"{work} has no student: run the chain there first (python benchmarks/own_scene.py "
                          f"--work {work} --until eval-reward)")
     vlm = str(SceneChain.chosen_vlm(work))
