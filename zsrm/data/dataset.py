@@ -48,7 +48,7 @@ class ExplorationData:
                                 "not a folder written by zsrm collect") from None
         # scene -> camera -> pixel-to-table map of the tilted camera (absent in older folders)
         self.table_homography: dict[str, dict[str, list]] = self.manifest.get("table_homography", {})
-        # scene -> camera -> pixel rays (zsrm.envs.cameras.pixel_rays; own scenes collected from 2026-12-08)
+        # scene -> camera -> pixel rays (zsrm.envs.cameras.pixel_rays; own scenes collected from 2026-12-07)
         self.pixel_rays: dict[str, dict[str, dict]] = self.manifest.get("pixel_rays", {})
 
     @property

@@ -68,7 +68,7 @@ def role_axes(model: mujoco.MjModel, data: mujoco.MjData, camera: str, role: str
 def holds_in_scene(relation: str, positions, axes: np.ndarray, thresholds: Thresholds, solid: bool = True) -> bool:
     """Table 1's ``relation`` over the objects' world ``positions``, read along ``axes`` (role_axes);
     on top of and below read on the positions themselves (z up) unless ``solid`` is False
-    (:attr:`~zsrm.tasks.relations.Relation.solid`, as the labeler reads them from 2026-12-08)."""
+    (:attr:`~zsrm.tasks.relations.Relation.solid`, as the labeler reads them from 2026-12-07)."""
     rel = RELATIONS[relation]
     if solid and rel.solid is not None:
         return bool(rel.solid(*[np.asarray(p, np.float64) for p in positions], thresholds))

@@ -66,7 +66,7 @@ class LabelConfig:
     refine: Literal["none", "silhouette"] = "silhouette"  # on the table-plane (tilted) camera, move each Grad-CAM point to its object's silhouette centre (zsrm.grounding.silhouette), or keep it
     box_vlm: str | None = None  # the VLM whose Grad-CAM finds the box, in data collected with it (a box-aware VLM); default: scene-box with the scene VLM (shipped: pretrained on box scenes), else --vlm itself
     thresholds: dict = field(default_factory=lambda: asdict(WORLD_THRESHOLDS), metadata={"cli": False})  # Table 1's, in metres
-    on_top: Literal["solid", "front"] = "solid"  # an own scene with calibrated cameras (collected from 2026-12-08): on top of / below read in 3-D, on points triangulated from the tilted and left cameras (the oracle on true positions), or on the front camera as Table 1 (as before)
+    on_top: Literal["solid", "front"] = "solid"  # an own scene with calibrated cameras (collected from 2026-12-07): on top of / below read in 3-D, on points triangulated from the tilted and left cameras (the oracle on true positions), or on the front camera as Table 1 (as before)
 
     def world_thresholds(self) -> Thresholds:
         return Thresholds(**self.thresholds)
