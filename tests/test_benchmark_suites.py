@@ -130,6 +130,22 @@ def test_libero_scene_observes_roles_and_parks_the_second_bowl(libero):
     assert second[0] > 1.5  # parked: "black bowl" names one object only
 
 
+def test_libero_envs_lent_to_two_subsets_each_hold_their_own(libero):
+    # zsrm keeps one env per subset and goes back to them; the adapter shares one LIBERO env among
+    # them, which held the last subset asked for until each reset set its own.
+    adapter, _, _ = libero
+    cameras = tuple(adapter.roles.values())
+    first = adapter.make_env(cameras, 32, ("black bowl", "plate"))
+    second = adapter.make_env(cameras, 32, ("cookie box",))
+    assert first.unwrapped is second.unwrapped  # one LIBERO env, built once
+    first.reset(seed=0)
+    assert set(adapter.object_positions(first)) == {"black bowl", "plate"}
+    second.reset(seed=0)
+    assert set(adapter.object_positions(second)) == {"cookie box"}
+    first.reset(seed=1)
+    assert set(adapter.object_positions(first)) == {"black bowl", "plate"}
+
+
 def test_libero_layouts_rest_on_the_objects_area_in_every_camera(libero):
     # Objects dropped onto each other were thrown onto the cabinet or the floor while their
     # presence captions said "present"; the front camera missed 10-30% of them at 50 degrees.

@@ -46,14 +46,25 @@ class SpatialBetween(SceneAdapter):
                                         image_size=image_size, **kwargs)
         env = _ENVS[key]
         env.held = held
-        return gym.wrappers.TimeLimit(_Shared(env), max_episode_steps=100)
+        return gym.wrappers.TimeLimit(_Shared(env, held), max_episode_steps=100)
 
 
 _ENVS: dict = {}  # kept envs, closed when the process ends
 
 
 class _Shared(gym.Wrapper):
-    """A kept env lent to one caller: its close() leaves the env open for the next."""
+    """A kept env lent to one caller, holding the caller's objects from each reset on (zsrm keeps
+    one env per subset and goes back to them: until 2026-12-07 the env held the last subset asked
+    for, and 95% of LIBERO's exploration frames held the bowl and the cookie box alone). Its
+    close() leaves the env open for the next caller."""
+
+    def __init__(self, env, held: tuple[str, ...]):
+        super().__init__(env)
+        self.held = held
+
+    def reset(self, **kwargs):
+        self.env.held = self.held
+        return self.env.reset(**kwargs)
 
     def close(self):
         pass
