@@ -29,14 +29,15 @@ SUITES = {
     "robosuite": {
         "scene": "examples.robosuite.adapter:StackScene",
         "goals": ("a red cube on top of a green cube", "a green cube on top of a red cube"),
+        "chain": ("--students", "1"),  # one student: rendering the Panda makes these chains the slowest
     },
     # Two LIBERO-Spatial tasks (the same objects in other layouts): the chain on the first, held-out
-    # frames from both. LIBERO renders 12 frames/s at 64 px here: fewer VLM seeds and images.
+    # frames from both. LIBERO renders 12 frames/s at 64 px here: fewer VLM seeds and images, one student.
     "libero": {
         "scene": "examples.libero.adapter:SpatialBetween",
         "frame_scenes": ("examples.libero.adapter:SpatialBetween", "examples.libero.adapter:SpatialNextToCookies"),
         "goals": ("a black bowl on top of a plate", "a ramekin on top of a plate"),
-        "chain": ("--vlm-seeds", "0", "1", "2", "--images", "2000", "--eval-images", "600"),
+        "chain": ("--vlm-seeds", "0", "1", "2", "--images", "2000", "--eval-images", "600", "--students", "1"),
     },
 }
 EVAL_SEED = 50_000  # held-out frames: seeds apart from every stage of the chain

@@ -133,6 +133,23 @@ def triangulate(rays_a: dict, xy_a, rays_b: dict, xy_b) -> np.ndarray:
     return 0.5 * (pa + s[..., None] * da + pb + t[..., None] * db)
 
 
+def triangulate_rays(rays: list[dict], xys: list) -> np.ndarray:
+    """``(..., 3)`` world points seen at pixels ``xys[i]`` (..., 2) of cameras ``rays[i]`` (their
+    :func:`pixel_rays`, two or more): the point nearest all the rays in the least-squares sense (two
+    rays: :func:`triangulate`'s midpoint); NaN where a pixel is."""
+    a = b = 0.0
+    for r, xy in zip(rays, xys):
+        xy = np.asarray(xy, np.float64)
+        d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1) @ np.asarray(r["direction"]).T
+        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        m = np.eye(3) - d[..., :, None] * d[..., None, :]  # projects onto the plane normal to the ray
+        a, b = a + m, b + m @ np.asarray(r["origin"], np.float64)
+    ok = np.isfinite(a).all(axis=(-2, -1)) & np.isfinite(b).all(axis=-1)
+    out = np.full(np.shape(b), np.nan)
+    out[ok] = np.linalg.solve(a[ok], b[ok][..., None])[..., 0]
+    return out
+
+
 def object_pixels(env, cameras=CAMERAS, size: int | None = None) -> dict[str, dict[str, np.ndarray]]:
     """True pixel coordinates of every object of a scene: ``{camera: {colour: (x, row)}}``."""
     base = getattr(env, "unwrapped", env)

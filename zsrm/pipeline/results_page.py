@@ -340,6 +340,10 @@ SIDE = [
      "(docs/own-scene.md)"),
     ("side/scenes/own_scene_student_ensembles.json", "the first example's students alone and their mean margins "
      "in twos and threes (probes/student_ensemble.py)"),
+    ("side/scenes/own_scene_epyc_one_student.json", "the first example's one command with one student (--students 1, "
+     "the default before 2026-12-07) on the AMD EPYC CPU that reproduces results/own_scene.json"),
+    ("side/scenes/own_scene_student_ensembles_intel.json", "the first example's three default students alone, in pairs "
+     "and all three by mean margin, on the Intel Xeon CPU that wrote results/scenes/own_scene.json"),
     ("side/scenes/own_scene_seed0.json", "the first example through zsrm own-scene with seed 0 alone and no zoomed "
      "views, the settings results/own_scene.json was made with: its numbers to the digit, on its CPU"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
