@@ -344,6 +344,8 @@ SIDE = [
      "the default before 2026-12-07) on the AMD EPYC CPU that reproduces results/own_scene.json"),
     ("side/scenes/own_scene_student_ensembles_intel.json", "the first example's three default students alone, in pairs "
      "and all three by mean margin, on the Intel Xeon CPU that wrote results/scenes/own_scene.json"),
+    ("side/scenes/own_scene_seed0_intel.json", "the first example through zsrm own-scene with the old script's "
+     "settings (seed 0 alone, no zoomed views, one student) on the Intel Xeon CPU of results/scenes/own_scene.json"),
     ("side/scenes/own_scene_seed0.json", "the first example through zsrm own-scene with seed 0 alone and no zoomed "
      "views, the settings results/own_scene.json was made with: its numbers to the digit, on its CPU"),
     ("side/own_scene/starts.json", "random and forward-leaning policies per start layout and pusher step of the "
